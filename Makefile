@@ -1,0 +1,29 @@
+# Two commands a new user needs: `make demo` and `make test`. Both create/refresh .venv first.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+FIND_LINKS := $(if $(wildcard /opt/wheels),--find-links /opt/wheels,)
+PIP := $(BIN)/pip install --disable-pip-version-check $(FIND_LINKS)
+
+.PHONY: demo test venv clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --disable-pip-version-check -q --upgrade pip wheel setuptools
+
+# Re-install whenever pyproject.toml changes (the stamp records the last install).
+$(VENV)/.installed: pyproject.toml | $(BIN)/python
+	$(PIP) -q "torch==2.13.0"
+	$(PIP) -q -e ".[test]"
+	touch $@
+
+venv: $(VENV)/.installed
+
+demo: venv
+	$(BIN)/l3mvn serve
+
+test: venv
+	HF_HUB_OFFLINE=1 TRANSFORMERS_OFFLINE=1 $(BIN)/python -m pytest -q
+
+clean:
+	rm -rf $(VENV) .pytest_cache

@@ -1,0 +1,69 @@
+"""Start and stop the dashboard: a viser server, the shared controller and its view."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import viser
+
+from app.session_worker import DashboardController
+from app.views import DashboardView
+from l3mvn.config import SimConfig
+from l3mvn.datasets import load_episode_set
+
+log = logging.getLogger(__name__)
+
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+@dataclass
+class Dashboard:
+    """A running dashboard; ``stop()`` ends the worker, the view thread and the web server."""
+
+    server: viser.ViserServer
+    controller: DashboardController
+    view: DashboardView
+
+    @property
+    def url(self) -> str:
+        host = self.server.get_host()
+        shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
+        return f"http://{shown}:{self.server.get_port()}"
+
+    def stop(self) -> None:
+        self.controller.close()
+        self.view.close()
+        self.server.stop()
+
+
+def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", policy: str = "oracle",
+                    host: str = "127.0.0.1", port: int = 8080, houses: int = 3,
+                    episodes_per_house: int = 5, seed: int = 0, cfg: SimConfig | None = None,
+                    steps_per_second: float = 4.0, record: bool = False,
+                    record_dir: str | Path = "recordings", verbose: bool = False) -> Dashboard:
+    """Load the episodes, start the worker and serve the page (returns at once; threads run it)."""
+    cfg = cfg or SimConfig()
+    if host not in LOCAL_HOSTS:
+        log.warning("serving on %s: anyone who can reach this machine can drive the dashboard", host)
+    episodes = load_episode_set(dataset, split, houses=houses, episodes_per_house=episodes_per_house,
+                                seed=seed, cfg=cfg)
+    controller = DashboardController(episodes, cfg, policy=policy, seed=seed,
+                                     steps_per_second=steps_per_second, record_dir=record_dir)
+    try:
+        if record:
+            controller.set_record(True)
+        server = viser.ViserServer(host=host, port=port, label="L3MVN Studio", verbose=verbose)
+    except BaseException:
+        controller.close()
+        raise
+    try:
+        view = DashboardView(server, controller)
+    except BaseException:
+        controller.close()
+        server.stop()
+        raise
+    if record:
+        view.record.value = True
+    return Dashboard(server, controller, view)

@@ -1,0 +1,396 @@
+"""The dashboard's controller: one shared navigation session, driven from a worker thread.
+
+Every browser tab acts on the same session. UI callbacks only validate and enqueue: a bad request
+raises ``L3MVNError`` at once (the view shows it to the tab that asked), and the work itself (a reset,
+a step that may wait on a slow language model) runs on the worker thread, so the page never blocks.
+Anything the worker raises is caught, reported as a Notice and in the snapshot, and the worker goes
+on serving.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable
+
+from app.map_image import agent_map_view, ground_truth_view
+from app.state import Cell, Frames, Metrics, Notice, Snapshot
+from l3mvn.config import SimConfig, config_hash
+from l3mvn.datasets import EpisodeSet
+from l3mvn.errors import L3MVNError
+from l3mvn.events import EventBus, StepEvent
+from l3mvn.policies import DIRECT_POLICIES, POLICY_NAMES, check_policy, make_policy
+from l3mvn.scenes.scene import GOAL_CATEGORIES
+from l3mvn.session import EpisodeSession
+from l3mvn.sim.simulator import BuiltinSimulator
+from l3mvn.sim.types import Episode, Pose
+from l3mvn.viz import colorize_depth, colorize_semantic
+
+log = logging.getLogger(__name__)
+
+MIN_SPEED, MAX_SPEED = 0.5, 60.0
+MAX_QUEUED_STEPS = 5
+FRAME_WIDTH = 320  # camera frames are shown at most this wide
+
+
+class DashboardController:
+    """Shared state + worker thread. Methods are safe to call from any thread."""
+
+    def __init__(self, episodes: EpisodeSet, cfg: SimConfig | None = None, *, policy: str = "oracle",
+                 seed: int = 0, steps_per_second: float = 4.0, record_dir: str | Path | None = None) -> None:
+        if not episodes.episodes:
+            raise L3MVNError(f"{episodes.name}/{episodes.split} has no episodes to show")
+        self.episodes, self.cfg, self.seed = episodes, cfg or SimConfig(), seed
+        self.policy_name = check_policy(policy)
+        self.scorer: str | None = None
+        self.record = False
+        self.record_dir = Path(record_dir or "recordings")
+        self.bus = EventBus()
+        self.bus.subscribe(self._on_event)
+        self._by_scene: dict[str, list[Episode]] = {}
+        for ep in episodes.episodes:
+            self._by_scene.setdefault(f"{ep.scene}/{ep.floor}", []).append(ep)
+        self._envs: dict[str, BuiltinSimulator] = {}
+        self._policies: dict[tuple[str, str], object] = {}
+        self._session: EpisodeSession | None = None
+        self._trajectory: list[Pose] = []
+        self._manual: Cell | None = None
+        self._segment_note = ""
+        self._recorder_off: Callable[[], None] | None = None
+        self._queue: queue.Queue[tuple[str, Callable[[], None], int | None]] = queue.Queue()
+        self._lock = threading.Lock()
+        self._running = False
+        self._reset_pending = False
+        self._steps_pending = 0
+        self._speed = _clamp_speed(steps_per_second)
+        self._seq = 0
+        self._snapshot = Snapshot(seq=0, policy=self.policy_name, running=False,
+                                  steps_per_second=self._speed, metrics=Metrics(),
+                                  note="Pick an episode and press Reset.")
+        self._snapshot_fns: list[Callable[[Snapshot], None]] = []
+        self._notice_fns: list[Callable[[Notice], None]] = []
+        self._closed = threading.Event()
+        self._idle = threading.Event()
+        self._idle.set()
+        self._thread = threading.Thread(target=self._loop, name="l3mvn-session-worker", daemon=True)
+        self._thread.start()
+
+    # --- what there is to pick from ----------------------------------------------------------
+    @property
+    def scene_keys(self) -> list[str]:
+        return list(self._by_scene)
+
+    def episodes_of(self, scene_key: str) -> list[Episode]:
+        if scene_key not in self._by_scene:
+            raise L3MVNError(f"unknown scene {scene_key!r}; valid scenes: {', '.join(self._by_scene)}")
+        return self._by_scene[scene_key]
+
+    @staticmethod
+    def scorer_names() -> tuple[str, ...]:
+        """Scorers offered by ``l3mvn.language``."""
+        from l3mvn.language import scorer_names
+
+        return tuple(scorer_names())
+
+    # --- listeners ---------------------------------------------------------------------------
+    def on_snapshot(self, fn: Callable[[Snapshot], None]) -> None:
+        self._snapshot_fns.append(fn)
+
+    def on_notice(self, fn: Callable[[Notice], None]) -> None:
+        self._notice_fns.append(fn)
+
+    @property
+    def snapshot(self) -> Snapshot:
+        return self._snapshot
+
+    @property
+    def session(self) -> EpisodeSession | None:
+        return self._session
+
+    @property
+    def running(self) -> bool:
+        return self._running
+
+    # --- commands (validate now, work on the worker) -----------------------------------------
+    def reset(self, scene_key: str, episode_id: int, *, client_id: int | None = None) -> None:
+        episode = self._find_episode(scene_key, episode_id)
+        with self._lock:
+            if self._reset_pending:
+                raise L3MVNError("a reset is already in progress (maybe from another tab); wait for it")
+            self._reset_pending, self._running = True, False
+        self._submit("reset", lambda: self._do_reset(episode), client_id)
+
+    def step(self, *, client_id: int | None = None) -> None:
+        with self._lock:
+            if self._running:
+                raise L3MVNError("Step is disabled while Run is active: press Pause first")
+            if self._steps_pending >= MAX_QUEUED_STEPS:
+                raise L3MVNError(f"{self._steps_pending} steps are already queued: the agent is busy")
+            self._steps_pending += 1
+        self._submit("step", self._do_step, client_id)
+
+    def run(self, *, client_id: int | None = None) -> None:
+        self._require_running_episode()
+        with self._lock:
+            self._running = True
+        self._publish(note="running")
+
+    def pause(self, *, client_id: int | None = None) -> None:
+        with self._lock:
+            was, self._running = self._running, False
+        if was:
+            self._publish(note="paused")
+
+    def set_speed(self, steps_per_second: float) -> None:
+        self._speed = _clamp_speed(steps_per_second)
+
+    def set_policy(self, name: str, *, client_id: int | None = None) -> None:
+        self.policy_name = check_policy(name)
+        self._notify(f"policy {name!r} takes effect on the next Reset", client_id=client_id)
+
+    def set_scorer(self, name: str, *, client_id: int | None = None) -> None:
+        names = self.scorer_names()
+        if name not in names:
+            raise L3MVNError(f"unknown scorer {name!r}; valid scorers: {', '.join(names) or 'none available'}")
+        self.scorer = name
+        self._submit("scorer", self._apply_scorer, client_id)
+
+    def set_record(self, on: bool, *, client_id: int | None = None) -> None:
+        self.record = on
+        state = f"on: episodes from the next Reset are saved under {self.record_dir}/" if on else "off"
+        self._notify(f"recording {state}", client_id=client_id)
+
+    def set_manual_goal(self, cell: Cell | None, *, client_id: int | None = None) -> None:
+        """Make a map cell the long-term goal until reached (None clears it)."""
+        session = self._require_running_episode()
+        setter = getattr(session.policy, "set_manual_goal", None)
+        if setter is None:
+            raise L3MVNError(
+                f"policy {session.policy_name!r} does not take manual goals; map-based policies do "
+                f"(valid: {', '.join(p for p in POLICY_NAMES if p not in DIRECT_POLICIES)})"
+            )
+        if cell is not None:
+            view = self._snapshot.map
+            if view is None or view.source != "agent map":
+                raise L3MVNError("the agent has no map yet: step once, then pick a goal on the map")
+            cell = (int(cell[0]), int(cell[1]))
+            if not view.contains(cell):
+                raise L3MVNError(f"cell {cell} is outside the {view.grid_shape[0]}x{view.grid_shape[1]} map")
+        self._submit("manual goal", lambda: self._do_manual_goal(setter, cell), client_id)
+
+    def change_target(self, goal: str, *, client_id: int | None = None) -> None:
+        session = self._require_running_episode()
+        if goal not in GOAL_CATEGORIES:
+            raise L3MVNError(f"unknown target {goal!r}; valid targets: {', '.join(GOAL_CATEGORIES)}")
+        present = session.env.scene.present_goals()
+        if goal not in present:
+            raise L3MVNError(f"target {goal!r} is not in {session.env.scene.key}; present: {', '.join(present)}")
+        if goal == session.episode.goal:
+            return
+        self._submit("target", lambda: self._do_change_target(goal), client_id)
+
+    # --- lifecycle ---------------------------------------------------------------------------
+    def wait_idle(self, timeout: float = 10.0) -> bool:
+        """Block until queued commands are done (tests; never called from the UI)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self._queue.empty() and self._idle.wait(0.01) and self._queue.empty():
+                return True
+        return False
+
+    def close(self) -> None:
+        self._running = False
+        self._closed.set()
+        self._queue.put(("close", lambda: None, None))
+        self._thread.join(timeout=5.0)
+        self._stop_recorder()
+
+    # --- worker ------------------------------------------------------------------------------
+    def _submit(self, what: str, fn: Callable[[], None], client_id: int | None) -> None:
+        self._idle.clear()
+        self._queue.put((what, fn, client_id))
+
+    def _loop(self) -> None:
+        next_step = time.monotonic()
+        while not self._closed.is_set():
+            wait = max(next_step - time.monotonic(), 0.0) if self._running else 0.2
+            try:
+                what, fn, client_id = self._queue.get(timeout=wait)
+            except queue.Empty:
+                if self._running:
+                    self._idle.clear()
+                    next_step = time.monotonic() + 1.0 / self._speed
+                    self._guarded("run", self._do_run_step, None)
+            else:
+                self._guarded(what, fn, client_id)
+            if self._queue.empty() and not self._running:
+                self._idle.set()
+
+    def _guarded(self, what: str, fn: Callable[[], None], client_id: int | None) -> None:
+        try:
+            fn()
+        except L3MVNError as exc:
+            self._running = False
+            self._notify(f"{what}: {exc}", level="warning", client_id=client_id)
+            self._publish(error=str(exc))
+        except Exception as exc:  # the page must stay up whatever the agent does
+            log.exception("dashboard %s failed", what)
+            self._running = False
+            self._notify(f"{what} failed: {type(exc).__name__}: {exc}", level="error")
+            self._publish(error=f"{what} failed: {type(exc).__name__}: {exc}")
+        finally:
+            with self._lock:
+                if what == "reset":
+                    self._reset_pending = False
+                elif what == "step":
+                    self._steps_pending -= 1
+
+    def _do_reset(self, episode: Episode) -> None:
+        key = f"{episode.scene}/{episode.floor}"
+        if key not in self._envs:
+            self._envs[key] = BuiltinSimulator(self.episodes.scene_of(episode), self.cfg)
+        env = self._envs[key]
+        if (key, self.policy_name) not in self._policies:
+            self._policies[(key, self.policy_name)] = make_policy(self.policy_name, env, self.seed)
+        policy = self._policies[(key, self.policy_name)]
+        chash = config_hash(self.cfg, extra={"policy": self.policy_name, "seed": self.seed})
+        self._stop_recorder()
+        self._session = EpisodeSession(env, policy, policy_name=self.policy_name, config_hash=chash, bus=self.bus)
+        self._manual, self._segment_note = None, ""
+        self._apply_scorer()
+        if self.record:
+            self._start_recorder(episode)
+        self._trajectory = []
+        self._session.start(episode)
+
+    def _do_step(self) -> None:
+        session = self._require_running_episode()
+        session.step()
+
+    def _do_run_step(self) -> None:
+        session = self._session
+        if session is None or session.done:
+            self._running = False
+            return
+        session.step()
+        if session.done:
+            self._running = False
+
+    def _do_manual_goal(self, setter: Callable, cell: Cell | None) -> None:
+        setter(cell)
+        self._manual = cell
+        what = "cleared the manual goal" if cell is None else f"manual long-term goal set to map cell {cell}"
+        self._notify(what)
+        self._publish(note=what)
+
+    def _do_change_target(self, goal: str) -> None:
+        session = self._require_running_episode()
+        previous, old = self._segment_note, session.episode.goal
+        # Set before the change: the new segment's first event is published inside change_target.
+        self._segment_note = f"segment {session.segment + 1}: target changed {old} -> {goal} at step {session.env.steps}"
+        try:
+            session.change_target(goal)
+        except Exception:
+            self._segment_note = previous
+            raise
+        self._notify(self._segment_note)
+
+    def _apply_scorer(self) -> None:
+        session = self._session
+        if self.scorer is None or session is None:
+            return
+        setter = getattr(session.policy, "set_scorer", None)
+        if setter is None:
+            self._notify(f"policy {session.policy_name!r} does not use a language scorer", level="warning")
+            return
+        setter(self.scorer)
+
+    def _start_recorder(self, episode: Episode) -> None:
+        from l3mvn.recording import Recorder
+
+        recorder = Recorder.for_episode(self.record_dir, self.episodes.name, episode, self.policy_name).attach(self.bus)
+        self._recorder_off = recorder.close
+
+    def _stop_recorder(self) -> None:
+        if self._recorder_off is not None:
+            off, self._recorder_off = self._recorder_off, None
+            off()
+
+    # --- step events -> snapshots ------------------------------------------------------------
+    def _on_event(self, event: StepEvent) -> None:
+        """Runs on the worker, right after each step: the map is a live view, so draw it now."""
+        stepped_at = time.time()
+        session = self._session
+        assert session is not None
+        self._trajectory.append(event.pose)
+        decision = event.decision
+        if decision is not None and decision.map is not None:
+            view = agent_map_view(decision)
+        elif session.policy_name in DIRECT_POLICIES:
+            view = ground_truth_view(session.env.scene, self._trajectory, decision)
+        else:
+            view = None  # a map-based agent before its first step
+        if decision is not None and decision.goal_kind == "manual" and decision.override:
+            self._manual = decision.long_term_goal
+        elif decision is not None and self._manual is not None and decision.goal_kind not in ("manual", ""):
+            self._manual = None  # the policy dropped it: reached or cleared
+        metrics = self._snapshot.metrics
+        if event.done and event.result is not None:
+            metrics = metrics.add(event.result)
+        self._publish(event=event, frames=self._frames(event), map=view, metrics=metrics,
+                      episode_id=session.episode.episode_id, scene=session.env.scene.key,
+                      note="", error=None, stepped_at=stepped_at)
+
+    def _frames(self, event: StepEvent) -> Frames:
+        obs = event.observation
+        k = max(1, obs.rgb.shape[1] // FRAME_WIDTH)
+        return Frames(
+            rgb=obs.rgb[::k, ::k],
+            depth=colorize_depth(obs.depth[::k, ::k], self.cfg.max_depth_m),
+            semantic=colorize_semantic(obs.semantic[::k, ::k], obs.categories),
+        )
+
+    def _publish(self, **changes) -> None:
+        with self._lock:
+            self._seq += 1
+            snap = replace(self._snapshot, seq=self._seq, running=self._running, policy=self.policy_name,
+                           steps_per_second=self._speed, manual_goal=self._manual,
+                           segment_note=self._segment_note, **changes)
+            self._snapshot = snap
+        for fn in list(self._snapshot_fns):
+            try:
+                fn(snap)
+            except Exception:
+                log.exception("dashboard view failed on snapshot %d", snap.seq)
+
+    def _notify(self, text: str, *, level: str = "info", client_id: int | None = None) -> None:
+        notice = Notice(text=text, level=level, client_id=client_id)
+        for fn in list(self._notice_fns):
+            try:
+                fn(notice)
+            except Exception:
+                log.exception("dashboard notice failed")
+
+    # --- helpers -----------------------------------------------------------------------------
+    def _find_episode(self, scene_key: str, episode_id: int) -> Episode:
+        for ep in self.episodes_of(scene_key):
+            if ep.episode_id == episode_id:
+                return ep
+        ids = ", ".join(str(e.episode_id) for e in self._by_scene[scene_key])
+        raise L3MVNError(f"unknown episode {episode_id!r} in {scene_key}; valid episode ids: {ids}")
+
+    def _require_running_episode(self) -> EpisodeSession:
+        session = self._session
+        if session is None or session.episode is None:
+            raise L3MVNError("no episode yet: pick one and press Reset")
+        if session.done:
+            raise L3MVNError(f"episode {session.episode.key} is over: press Reset to start another")
+        return session
+
+
+def _clamp_speed(value: float) -> float:
+    return float(min(max(value, MIN_SPEED), MAX_SPEED))

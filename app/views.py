@@ -1,0 +1,451 @@
+"""The viser page: shared controls in the side panel, the map as a textured plane in the 3D view.
+
+All handles are shared (``server.gui`` / ``server.scene``), so every tab shows the same session and a
+new or reloaded tab gets the current state from viser on connect. Only notices about a tab's own
+request go to that tab (``client.add_notification``). Snapshots are drawn on a thread of their own
+that always takes the newest one, so a fast agent drops frames instead of queueing them.
+
+Scene frame: map cell (row, col) -> (x, y) = ((col + 0.5) res, -(row + 0.5) res), z up toward the
+camera, so the top-down view shows the map the way its image is stored (row 0 on top).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+
+import numpy as np
+import viser
+
+from app.map_image import score_color
+from app.session_worker import MAX_SPEED, MIN_SPEED, DashboardController
+from app.state import Cell, MapView, Notice, Snapshot
+from l3mvn.errors import L3MVNError
+from l3mvn.policies import POLICY_NAMES
+from l3mvn.scenes.scene import GOAL_CATEGORIES
+from l3mvn.viz import side_by_side
+
+log = logging.getLogger(__name__)
+
+BUTTONS = ("Reset", "Step", "Run", "Pause")
+MARKER_RADIUS_M = 0.22
+_LEVEL_COLORS = {"info": "blue", "warning": "yellow", "error": "red"}
+
+
+def cell_to_xy(cell: Cell, res: float) -> tuple[float, float]:
+    return (cell[1] + 0.5) * res, -(cell[0] + 0.5) * res
+
+
+def xy_to_cell(x: float, y: float, res: float) -> Cell:
+    return int(math.floor(-y / res)), int(math.floor(x / res))
+
+
+def ray_to_cell(origin, direction, res: float) -> Cell | None:
+    """Where a click ray meets the map plane (z = 0); None when it runs parallel or away."""
+    oz, dz = float(origin[2]), float(direction[2])
+    if abs(dz) < 1e-9 or -oz / dz < 0:
+        return None
+    t = -oz / dz
+    return xy_to_cell(float(origin[0]) + t * float(direction[0]), float(origin[1]) + t * float(direction[1]), res)
+
+
+class DashboardView:
+    """Builds the page once and keeps it in sync with the controller's snapshots."""
+
+    def __init__(self, server: viser.ViserServer, controller: DashboardController) -> None:
+        self.server, self.ctl = server, controller
+        self._latest: Snapshot | None = None
+        self._drawn_event: object = None
+        self._wake = threading.Condition()
+        self._closed = False
+        self._markers: list[tuple[viser.IcosphereHandle, viser.LabelHandle]] = []
+        self._frontier_cells: dict[str, Cell] = {}
+        self._fitted_episode: tuple | None = None
+        self._build_gui()
+        self._build_scene()
+        controller.on_snapshot(self._on_snapshot)
+        controller.on_notice(self._on_notice)
+        self._thread = threading.Thread(target=self._draw_loop, name="l3mvn-dashboard-view", daemon=True)
+        self._thread.start()
+        self._on_snapshot(controller.snapshot)
+
+    # --- layout ------------------------------------------------------------------------------
+    def _build_gui(self) -> None:
+        gui, ctl = self.server.gui, self.ctl
+        gui.configure_theme(control_width="large", show_share_button=False, brand_color=(40, 90, 200))
+        gui.add_markdown("**L3MVN Studio**: language-guided ObjectNav, live")
+        with gui.add_folder("Episode"):
+            self.scene = gui.add_dropdown("Scene", ctl.scene_keys)
+            self.episode = gui.add_dropdown("Episode", self._episode_labels(ctl.scene_keys[0]))
+            self.target = gui.add_dropdown("Target", GOAL_CATEGORIES,
+                                           hint="changing it mid-episode starts a new segment")
+            self.policy = gui.add_dropdown("Policy", POLICY_NAMES, initial_value=ctl.policy_name,
+                                           hint="takes effect on the next Reset")
+            scorers = ctl.scorer_names()
+            self.scorer = gui.add_dropdown("Scorer", scorers or ("none",), disabled=not scorers,
+                                           hint=None if scorers else "l3mvn.language offers no scorers")
+            self.controls = gui.add_button_group("Controls", BUTTONS)
+            self.speed = gui.add_slider("Steps / s", min=MIN_SPEED, max=MAX_SPEED, step=0.5,
+                                        initial_value=ctl.snapshot.steps_per_second)
+            self.record = gui.add_checkbox("Record (.rrd)", False, hint="rerun recording of each new episode")
+        with gui.add_folder("Status"):
+            self.status = gui.add_markdown("")
+            self.metrics = gui.add_markdown("")
+            self.fit = gui.add_button("Fit map in view")
+        with gui.add_folder("Camera"):
+            blank = np.zeros((12, 16, 3), np.uint8)
+            self.rgb = gui.add_image(blank, label="RGB")
+            self.depth_semantic = gui.add_image(blank, label="Depth (near blue, far red) | semantic")
+        with gui.add_folder("Frontiers"):
+            self.frontier_pick = gui.add_dropdown("Frontier", ("none",), disabled=True)
+            self.goal_buttons = gui.add_button_group("Manual goal", ("Go to frontier", "Clear"))
+            self.frontier_table = gui.add_markdown("_no frontiers: the policy keeps no map_")
+        with gui.add_folder("Legend"):
+            self.legend = gui.add_html("")
+        self._wire_gui()
+
+    def _wire_gui(self) -> None:
+        ctl = self.ctl
+
+        @self.scene.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is not None:
+                labels = self._episode_labels(self.scene.value)
+                self.episode.options = labels
+                self.episode.value = labels[0]
+
+        @self.controls.on_click
+        def _(event: viser.GuiEvent) -> None:
+            self._act(event, self._press, self.controls.value, event.client_id)
+
+        @self.speed.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is not None:
+                ctl.set_speed(self.speed.value)
+
+        @self.policy.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is not None:
+                self._act(event, lambda: ctl.set_policy(self.policy.value, client_id=event.client_id))
+
+        @self.scorer.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is not None:
+                self._act(event, lambda: ctl.set_scorer(self.scorer.value, client_id=event.client_id))
+
+        @self.record.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is None:
+                return
+            try:
+                ctl.set_record(self.record.value, client_id=event.client_id)
+            except L3MVNError as exc:
+                self.record.value = False
+                self._tell(event.client_id, str(exc), "warning")
+
+        @self.target.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is not None and ctl.snapshot.event is not None and not ctl.snapshot.event.done:
+                self._act(event, lambda: ctl.change_target(self.target.value, client_id=event.client_id))
+
+        @self.goal_buttons.on_click
+        def _(event: viser.GuiEvent) -> None:
+            if self.goal_buttons.value == "Clear":
+                self._act(event, lambda: ctl.set_manual_goal(None, client_id=event.client_id))
+                return
+            cell = self._frontier_cells.get(self.frontier_pick.value)
+            if cell is None:
+                self._tell(event.client_id, "no frontier picked: step until the map shows frontiers", "warning")
+                return
+            self._act(event, lambda: ctl.set_manual_goal(cell, client_id=event.client_id))
+
+        @self.fit.on_click
+        def _(event: viser.GuiEvent) -> None:
+            view = ctl.snapshot.map
+            if view is not None and event.client is not None:
+                self._fit_camera(event.client.camera, view)
+
+    def _build_scene(self) -> None:
+        scene = self.server.scene
+        scene.set_up_direction("+y")
+        scene.add_light_ambient("/light", intensity=1.0)
+        self.map_plane = scene.add_image("/map", np.zeros((8, 8, 3), np.uint8), 1.0, 1.0, format="png",
+                                         cast_shadow=False, receive_shadow=False, visible=False)
+        self.map_note = scene.add_label("/map_note", "Press Reset to start an episode", position=(0, 0, 0.2),
+                                        font_screen_scale=1.4)
+        self.agent = scene.add_mesh_simple("/agent", *_arrow_mesh(), color=(230, 30, 40), visible=False)
+        self.ltg = scene.add_icosphere("/goal/long_term", 0.16, (220, 20, 60), visible=False)
+        self.ltg_label = scene.add_label("/goal/long_term/label", "long-term goal", position=(0.0, -0.3, 0.1),
+                                        anchor="top-center")
+        self.stg = scene.add_icosphere("/goal/short_term", 0.08, (255, 150, 0), visible=False)
+
+        @scene.on_click()
+        def _(event: viser.SceneClickEvent) -> None:
+            self._on_map_click(event)
+
+    # --- input -------------------------------------------------------------------------------
+    def _press(self, button: str, client_id: int) -> None:
+        ctl = self.ctl
+        if button == "Reset":
+            scene_key = self.scene.value
+            ctl.reset(scene_key, self._episode_id(self.episode.value), client_id=client_id)
+        elif button == "Step":
+            ctl.step(client_id=client_id)
+        elif button == "Run":
+            ctl.run(client_id=client_id)
+        else:
+            ctl.pause(client_id=client_id)
+
+    def _on_map_click(self, event: viser.SceneClickEvent) -> None:
+        view = self.ctl.snapshot.map
+        if view is None:
+            self._tell(event.client_id, "no map yet: press Reset, then Step", "warning")
+            return
+        cell = ray_to_cell(event.ray_origin, event.ray_direction, view.resolution_m)
+        rows, cols = view.cells
+        r0, c0 = view.origin
+        if cell is None or not (r0 <= cell[0] < r0 + rows and c0 <= cell[1] < c0 + cols):
+            self._tell(event.client_id, "that click is outside the map: click on the map or a frontier", "warning")
+            return
+        hit = self._frontier_hit(view, cell)
+        self._act(None, lambda: self.ctl.set_manual_goal(hit or cell, client_id=event.client_id),
+                  client_id=event.client_id)
+
+    def _frontier_hit(self, view: MapView, cell: Cell) -> Cell | None:
+        reach = (MARKER_RADIUS_M * 1.5 / view.resolution_m) ** 2
+        near = [(float((f.cell[0] - cell[0]) ** 2 + (f.cell[1] - cell[1]) ** 2), f.cell) for f in view.frontiers]
+        near = [n for n in near if n[0] <= reach]
+        return min(near)[1] if near else None
+
+    def _act(self, event: viser.GuiEvent | None, fn, *args, client_id: int | None = None) -> None:
+        """Run a controller command; a refused one becomes a notice for the tab that asked."""
+        who = client_id if event is None else event.client_id
+        try:
+            fn(*args)
+        except L3MVNError as exc:
+            self._tell(who, str(exc), "warning")
+
+    def _tell(self, client_id: int | None, text: str, level: str = "info") -> None:
+        self._on_notice(Notice(text, level, client_id))
+
+    def _on_notice(self, notice: Notice) -> None:
+        clients = self.server.get_clients()
+        targets = [clients[notice.client_id]] if notice.client_id in clients else (
+            [] if notice.client_id is not None else list(clients.values()))
+        title = {"info": "L3MVN", "warning": "Request refused", "error": "Error"}[notice.level]
+        for client in targets:
+            client.add_notification(title, notice.text, auto_close_seconds=6.0,
+                                    color=_LEVEL_COLORS[notice.level])
+
+    # --- output ------------------------------------------------------------------------------
+    def _on_snapshot(self, snap: Snapshot) -> None:
+        with self._wake:
+            self._latest = snap
+            self._wake.notify()
+
+    def close(self) -> None:
+        with self._wake:
+            self._closed = True
+            self._wake.notify()
+        self._thread.join(timeout=5.0)
+
+    def _draw_loop(self) -> None:
+        while True:
+            with self._wake:
+                while self._latest is None and not self._closed:
+                    self._wake.wait()
+                if self._closed:
+                    return
+                snap, self._latest = self._latest, None
+            try:
+                self._draw(snap)
+            except Exception:  # a drawing bug must not stop later updates
+                log.exception("dashboard: drawing snapshot %d failed", snap.seq)
+
+    def _draw(self, snap: Snapshot) -> None:
+        with self.server.atomic():
+            self.status.content = _status_markdown(snap)
+            m = snap.metrics
+            self.metrics.content = (f"**This server session**: {m.episodes} episodes done, "
+                                    f"SR {m.sr:.2f}, SPL {m.spl:.2f}")
+            if snap.event is self._drawn_event:
+                return
+            self._drawn_event = snap.event
+            if snap.event is not None and self.target.value != snap.event.goal:
+                self.target.value = snap.event.goal
+            if snap.frames is not None:
+                self.rgb.image = snap.frames.rgb
+                self.depth_semantic.image = side_by_side(snap.frames.depth, snap.frames.semantic)
+            if snap.map is not None:
+                self._draw_map(snap.map, snap)
+            elif snap.event is not None:
+                self._hide_map("the agent's map appears after the first step")
+
+    def _draw_map(self, view: MapView, snap: Snapshot) -> None:
+        res = view.resolution_m
+        rows, cols = view.cells
+        (x0, y0), (x1, y1) = cell_to_xy(view.origin, res), cell_to_xy((view.origin[0] + rows - 1, view.origin[1] + cols - 1), res)
+        plane = self.map_plane
+        plane.image = view.image[::-1]  # viser's image plane has row 0 at -y; our row 0 is on top
+        plane.render_width, plane.render_height = cols * res, rows * res
+        plane.position = ((x0 + x1) / 2, (y0 + y1) / 2, 0.0)
+        plane.visible = True
+        ax, ay = cell_to_xy(view.agent_cell, res)
+        self.agent.position = (ax, ay, 0.05)
+        self.agent.wxyz = (math.cos(-view.agent_heading / 2), 0.0, 0.0, math.sin(-view.agent_heading / 2))
+        self.agent.visible = True
+        self._place(self.ltg, view.long_term_goal, res, 0.16)
+        self.ltg_label.text = "manual goal" if view.goal_kind == "manual" else f"long-term goal ({view.goal_kind or '-'})"
+        self._place(self.stg, view.short_term_goal, res, 0.08)
+        self.map_note.text = ("" if view.source == "agent map"
+                              else f"ground-truth floor plan: policy {snap.policy!r} keeps no map")
+        self.map_note.position = (x0, y0 + 0.4, 0.2)
+        self._draw_frontiers(view)
+        key = (snap.event.episode_key if snap.event else None, view.source)
+        if key != self._fitted_episode:
+            self._fitted_episode = key
+            self._fit_all(view)
+        self.legend.content = _legend_html(view)
+
+    def _hide_map(self, note: str) -> None:
+        for handle in (self.map_plane, self.agent, self.ltg, self.stg, *(s for s, _ in self._markers)):
+            handle.visible = False
+        self.ltg_label.text = ""
+        self.map_note.text = note
+        self.frontier_pick.options, self.frontier_pick.disabled = ("none",), True
+        self.frontier_table.content = "_no map yet_"
+
+    def _place(self, handle, cell: Cell | None, res: float, z: float) -> None:
+        if cell is None:
+            handle.visible = False
+            return
+        x, y = cell_to_xy(cell, res)
+        handle.position = (x, y, z)
+        handle.visible = True
+
+    def _draw_frontiers(self, view: MapView) -> None:
+        res = view.resolution_m
+        while len(self._markers) < len(view.frontiers):
+            i = len(self._markers)
+            sphere = self.server.scene.add_icosphere(f"/frontiers/{i}", MARKER_RADIUS_M, (150, 150, 150))
+            label = self.server.scene.add_label(f"/frontiers/{i}/label", "", position=(0.0, 0.3, 0.0),
+                                                font_screen_scale=0.75, anchor="bottom-center")
+            self._markers.append((sphere, label))
+        for i, (sphere, label) in enumerate(self._markers):
+            if i >= len(view.frontiers):
+                sphere.visible = False
+                continue
+            f = view.frontiers[i]
+            x, y = cell_to_xy(f.cell, res)
+            sphere.position = (x, y, MARKER_RADIUS_M)
+            sphere.color = score_color(f.fused if f.fused is not None else f.s_cu)
+            label.text = ("★ " if f.chosen else "") + f.label
+            sphere.visible = True
+        labels = [f.label for f in view.frontiers]
+        self._frontier_cells = {f.label: f.cell for f in view.frontiers}
+        if labels:
+            self.frontier_pick.options = labels
+            self.frontier_pick.disabled = False
+        else:
+            self.frontier_pick.options = ("none",)
+            self.frontier_pick.disabled = True
+        self.frontier_table.content = _frontier_markdown(view)
+
+    def _fit_all(self, view: MapView) -> None:
+        for client in self.server.get_clients().values():
+            self._fit_camera(client.camera, view)
+        x, y, z = _fit_pose(view)
+        self.server.initial_camera.position = (x, y, z)
+        self.server.initial_camera.look_at = (x, y, 0.0)
+
+    def _fit_camera(self, camera, view: MapView) -> None:
+        x, y, z = _fit_pose(view)
+        camera.up_direction = (0.0, 1.0, 0.0)
+        camera.position = (x, y, z)  # moves look_at along with it: set look_at after
+        camera.look_at = (x, y, 0.0)
+
+    # --- helpers -----------------------------------------------------------------------------
+    def _episode_labels(self, scene_key: str) -> tuple[str, ...]:
+        return tuple(f"{ep.episode_id}: {ep.goal}" for ep in self.ctl.episodes_of(scene_key))
+
+    @staticmethod
+    def _episode_id(label: str) -> int:
+        head = label.split(":", 1)[0]
+        if not head.strip().isdigit():
+            raise L3MVNError(f"unknown episode {label!r}: pick one from the list")
+        return int(head)
+
+
+def _fit_pose(view: MapView) -> tuple[float, float, float]:
+    """Camera above the map centre, high enough that a 75 deg view shows all of the crop."""
+    res = view.resolution_m
+    rows, cols = view.cells
+    x, y = cell_to_xy((view.origin[0] + rows // 2, view.origin[1] + cols // 2), res)
+    extent = max(rows, cols) * res
+    # Shifted right so the map sits left of the control panel.
+    return x + 0.2 * extent, y, 0.62 * extent / math.tan(math.radians(75) / 2)
+
+
+def _arrow_mesh() -> tuple[np.ndarray, np.ndarray]:
+    """A flat arrowhead pointing along +x (the agent's heading), 0.4 m long."""
+    v = np.array([[0.25, 0, 0], [-0.15, 0.14, 0], [-0.07, 0, 0], [-0.15, -0.14, 0]], np.float32)
+    return v, np.array([[0, 1, 2], [0, 2, 3]], np.uint32)
+
+
+def _status_markdown(snap: Snapshot) -> str:
+    ev = snap.event
+    lines = []
+    if snap.error:
+        lines.append(f"**Error:** {snap.error}")
+    if ev is None:
+        lines.append(snap.note or "No episode yet.")
+        return "\n\n".join(lines)
+    state = "running" if snap.running else ("finished" if ev.done else "paused")
+    lines.append(f"**{ev.episode_key}** ({snap.policy}), target **{ev.goal}**, {state}")
+    action = ev.action.name.lower() if ev.action is not None else "(reset)"
+    lines.append(f"Step **{ev.step}**, action `{action}`, segment {ev.segment}")
+    dist = ev.ground_truth.get("distance_to_goal_m")
+    if dist is not None:
+        lines.append(f"Distance to goal: {dist:.2f} m _(ground truth, not known to the agent)_")
+    if snap.segment_note:
+        lines.append(f"**New segment**: {snap.segment_note}")
+    d = ev.decision
+    if d is not None and (d.reason or d.goal_kind):
+        lines.append(f"Goal: {d.goal_kind or '-'}; {d.reason}".rstrip("; "))
+    if snap.manual_goal is not None or (d is not None and d.override):
+        lines.append(f"**Manual goal**: {d.override if d is not None and d.override else snap.manual_goal}")
+    if ev.done and ev.result:
+        r = ev.result
+        verdict = "**SUCCESS**" if r.get("success") else f"**FAILURE** ({r.get('failure')})"
+        lines.append(f"{verdict}: SPL {r.get('spl', 0):.2f}, {r.get('steps')} steps")
+    if snap.note and snap.note not in ("running", "paused"):
+        lines.append(f"_{snap.note}_")
+    return "\n\n".join(lines)
+
+
+def _frontier_markdown(view: MapView) -> str:
+    if not view.frontiers:
+        return ("_no frontiers: the policy keeps no map_" if view.source != "agent map"
+                else "_no frontiers on the map right now_")
+    rows = ["| | S_LLM | S_CU | fused | objects |", "|---|---|---|---|---|"]
+    for f in view.frontiers:
+        llm = "-" if f.s_llm is None else f"{f.s_llm:.2f}"
+        fused = "-" if f.fused is None else f"{f.fused:.2f}"
+        rows.append(f"| {'★' if f.chosen else ''}F{f.id} | {llm} | {f.s_cu:.2f} | {fused} | "
+                    f"{', '.join(f.objects) or '-'} |")
+    queries = [f"- F{f.id} `{q}`" for f in view.frontiers for q in list(f.queries.values())[:1]]
+    return "\n".join(rows) + ("\n\n**Queries**\n" + "\n".join(queries) if queries else "")
+
+
+def _legend_html(view: MapView) -> str:
+    from app.map_image import FREE, OBSTACLE, TRAJECTORY, UNEXPLORED
+
+    fixed = [("unexplored", UNEXPLORED), ("free", FREE), ("obstacle", OBSTACLE), ("trajectory", TRAJECTORY)]
+    items = "".join(
+        f'<span style="display:inline-block;margin:2px 8px 2px 0;font-size:12px">'
+        f'<span style="display:inline-block;width:11px;height:11px;border:1px solid #888;'
+        f'background:rgb{tuple(rgb)};margin-right:4px;vertical-align:middle"></span>{name}</span>'
+        for name, rgb in [*fixed, *view.legend]
+    )
+    return f'<div style="line-height:1.2">{items}</div>'

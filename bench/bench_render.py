@@ -1,0 +1,106 @@
+"""Render speed and mesh size of the built-in simulator, as a markdown table.
+
+    python bench/bench_render.py [--dataset ../shared/data/gibson_semexp --split train] [--frames 50]
+
+Without the dataset it benchmarks a synthetic six-room house drawn below, so it always runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage as ndi
+
+from l3mvn.config import SimConfig
+from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap, disk
+from l3mvn.sim.render import Renderer
+from l3mvn.sim.types import Pose
+from l3mvn.sim.world import build_world
+
+SIZES = ((120, 160), (480, 640))
+DEFAULT_SCENES = ("Allensville", "Lakeville", "Lindenwood", "Wainscott")
+
+
+def synthetic_house() -> SceneMap:
+    """A 15 x 10 m house: a 3 x 2 grid of rooms with doors, furniture in each."""
+    h, w = 200, 300
+    free = np.zeros((h, w), bool)
+    for r0 in (4, 102):
+        for c0 in (4, 102, 200):
+            free[r0 : r0 + 94, c0 : c0 + 96] = True
+    free[40:60, 96:206] = True  # doors along the top row
+    free[140:160, 96:206] = True
+    free[94:106, 40:60] = True  # and between the rows
+    objects = np.zeros((len(GIBSON_CATEGORIES), h, w), bool)
+    layout = {
+        "bed": (10, 50, 10, 50), "chair": (120, 130, 120, 130), "couch": (110, 125, 220, 280),
+        "toilet": (10, 22, 280, 290), "dining-table": (150, 170, 130, 170), "refrigerator": (180, 195, 10, 25),
+        "tv": (104, 108, 240, 270), "potted plant": (80, 86, 180, 186),
+    }
+    for name, (r0, r1, c0, c1) in layout.items():
+        objects[GIBSON_CATEGORIES.index(name), r0:r1, c0:c1] = True
+    free &= ~objects.any(0)
+    return SceneMap(
+        name="Synthetic", floor=0, categories=GIBSON_CATEGORIES,
+        navigable=ndi.binary_erosion(free, disk(4)), objects=objects,
+    )
+
+
+def load_scenes(dataset: Path | None, split: str, names: tuple[str, ...]) -> list[SceneMap]:
+    if dataset is None or not (dataset / split / f"{split}_info.pbz2").exists():
+        return [synthetic_house()]
+    from l3mvn.scenes.semexp import load_split
+
+    scenes = load_split(dataset, split)
+    chosen = [n for n in names if n in scenes] or sorted(scenes)[:4]
+    return [scenes[n][min(scenes[n])] for n in chosen]
+
+
+def bench_scene(scene: SceneMap, cfg: SimConfig, frames: int, rng: np.random.Generator) -> dict:
+    t0 = time.perf_counter()
+    world = build_world(scene, cfg)
+    build_s = time.perf_counter() - t0
+    renderer = Renderer(world, cfg)
+    renderer.render(Pose(0.0, 0.0, 0.0), 0.0, 8, 8)  # compile / load the jitted kernels
+    cells = np.argwhere(scene.walkable)
+    row = {"scene": scene.key, "grid": f"{scene.shape[0]}x{scene.shape[1]}", "triangles": world.num_triangles,
+           "build_s": build_s}
+    for h, w in SIZES:
+        times = []
+        for _ in range(frames):
+            r, c = cells[rng.integers(len(cells))]
+            x, y = scene.cell_center(int(r), int(c))
+            pose = Pose(x, y, float(rng.uniform(-math.pi, math.pi)))
+            tilt = math.radians(float(rng.choice([-30.0, 0.0, 30.0])))
+            t = time.perf_counter()
+            renderer.render(pose, tilt, h, w)
+            times.append((time.perf_counter() - t) * 1e3)
+        row[f"{h}x{w}"] = (float(np.median(times)), float(np.percentile(times, 90)))
+    return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dataset", type=Path, default=Path(__file__).resolve().parents[2] / "shared/data/gibson_semexp")
+    parser.add_argument("--split", default="train")
+    parser.add_argument("--scenes", nargs="*", default=list(DEFAULT_SCENES))
+    parser.add_argument("--frames", type=int, default=50)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    cfg = SimConfig()
+    rng = np.random.default_rng(args.seed)
+    rows = [bench_scene(s, cfg, args.frames, rng) for s in load_scenes(args.dataset, args.split, tuple(args.scenes))]
+    sizes = [f"{h}x{w}" for h, w in SIZES]
+    print("| scene | grid | triangles | build s | " + " | ".join(f"{s} median / p90 ms" for s in sizes) + " |")
+    print("|---|---|---:|---:|" + "---:|" * len(sizes))
+    for row in rows:
+        cells = " | ".join(f"{row[s][0]:.1f} / {row[s][1]:.1f}" for s in sizes)
+        print(f"| {row['scene']} | {row['grid']} | {row['triangles']} | {row['build_s']:.2f} | {cells} |")
+
+
+if __name__ == "__main__":
+    main()

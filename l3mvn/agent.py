@@ -1,0 +1,310 @@
+"""The modular L3MVN agent: observation -> semantic map -> frontiers -> long-term goal -> action.
+
+The global policy (nearest frontier, cost-utility, random sample, language-scored) only chooses the
+long-term goal; mapping, target detection, commitment, stopping and the FMM local policy are shared,
+so policies differ only where the paper says they do. Every step returns a ``Decision`` that explains
+itself (map, frontiers with their scores, chosen goal and why) for the dashboard and the recorder.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import zlib
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from l3mvn.config import SimConfig
+from l3mvn.errors import L3MVNError
+from l3mvn.events import Decision
+from l3mvn.frontiers import Frontier, FrontierConfig, extract_frontiers
+from l3mvn.mapping import CameraIntrinsics, MapConfig, SemanticMap, SemanticMapper
+from l3mvn.mapping.projection import downsample_frame
+from l3mvn.perception import SegmentationNoise
+from l3mvn.planning import LocalPlanner, PlannerConfig
+from l3mvn.policies.global_policies import GlobalPolicy, Selection
+from l3mvn.sim.types import Action, Episode, Observation, Pose
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """Agent-level constants (spec: "Choosing the long-term goal", "Lessons")."""
+
+    map: MapConfig = field(default_factory=MapConfig)
+    frontier: FrontierConfig = field(default_factory=FrontierConfig)
+    # Obstacles grow by 1 cell, not the full agent radius: maps' navmeshes (SemExp channel 0) are
+    # already eroded by the radius, and the built-in world keeps walls 2 cells from where the agent's
+    # centre may stand, so a 3-cell dilation closes real doorways of Gibson houses.
+    planner: PlannerConfig = field(default_factory=lambda: PlannerConfig(obstacle_dilation_cells=1))
+    map_input_height: int = 120
+    map_input_width: int = 160
+    replan_every: int = 10  # num_local_steps: re-select the long-term goal this often
+    look_around_steps: int = 12  # an initial 360-degree turn (12 x 30 deg): ~+0.08 SPL in the prototype
+    target_min_cells: int = 4  # cells of the goal channel before the target counts as seen
+    stop_distance_m: float = 0.9  # stop when the mapped target is this close (success needs < 1.0 m)
+    frontier_reached_m: float = 0.75  # >= the 0.5 m minimum frontier distance (no dead zone)
+    commitment_margin: float = 0.15  # keep the current frontier unless another scores this much higher
+    # Escape: after this many steps with the goal unreachable (usually walled in by its own
+    # collision marks) or a stuck signal, clear the marks and wiggle out with random turns.
+    escape_after_unreachable: int = 3
+    seg_noise: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.frontier_reached_m < self.frontier.min_distance_m:
+            raise L3MVNError("frontier_reached_m must be >= the minimum frontier distance (else a dead zone)")
+        if self.replan_every < 1 or self.target_min_cells < 1:
+            raise L3MVNError("replan_every and target_min_cells must be >= 1")
+
+
+_EXPLORING = ("frontier", "random", "explore")
+
+
+class MapAgent:
+    """A policy object for ``EpisodeSession``: ``reset(episode)``, ``act(obs) -> Decision``."""
+
+    def __init__(self, global_policy: GlobalPolicy, categories: tuple[str, ...], sim: SimConfig,
+                 cfg: AgentConfig | None = None, seed: int = 0) -> None:
+        self.cfg = cfg or AgentConfig()
+        self.global_policy = global_policy
+        self.categories = categories
+        self.sim = sim
+        self.seed = seed
+        self.planner = LocalPlanner(self.cfg.planner)
+        self.noise = SegmentationNoise(self.cfg.seg_noise, len(categories), seed)
+        self._mapper: SemanticMapper | None = None
+        self._frame_shape: tuple[int, int] | None = None
+        self.stuck = False
+
+    # --- episode lifecycle -------------------------------------------------------------------
+    def reset(self, episode: Episode) -> None:
+        self.goal = episode.goal
+        self.planner.reset()
+        ep_seed = zlib.crc32(episode.key.encode())
+        self.rng = np.random.default_rng([self.seed, ep_seed])
+        self.noise.reset(ep_seed)
+        self._mapper = None  # built on the first frame, sized from it
+        self._start = episode.start
+        self._steps = 0
+        self._since_select = math.inf
+        self._ltg: tuple[int, int] | None = None
+        self._ltg_kind = ""
+        self._ltg_frontier: int | None = None
+        self._ltg_reason = ""
+        self._manual: tuple[int, int] | None = None
+        self._blocked: list[tuple[int, int]] = []
+        self._prev_pose: Pose | None = None
+        self._prev_action: Action | None = None
+        self._frontiers: list[Frontier] = []
+        self._unreachable = 0
+        self._escape: list[Action] = []
+        self.stuck = False
+
+    def change_target(self, goal: str) -> None:
+        if goal not in self.categories:
+            raise L3MVNError(f"unknown target {goal!r}; valid: {', '.join(self.categories)}")
+        self.goal = goal
+        self._since_select = math.inf
+
+    def set_scorer(self, name: str) -> None:
+        """Swap the language scorer of a language policy (the dashboard's scorer choice)."""
+        setter = getattr(self.global_policy, "set_scorer", None)
+        if setter is None:
+            raise L3MVNError(f"policy {self.global_policy.name!r} uses no language scorer")
+        setter(name)
+
+    def set_manual_goal(self, cell: tuple[int, int] | None) -> None:
+        """Pursue this map cell until reached, or clear the override with None."""
+        if cell is not None:
+            size = self.cfg.map.map_cells
+            if not (0 <= cell[0] < size and 0 <= cell[1] < size):
+                raise L3MVNError(f"cell {cell} lies outside the {size}x{size} map")
+            cell = (int(cell[0]), int(cell[1]))
+        self._manual = cell
+
+    # --- one step ----------------------------------------------------------------------------
+    def act(self, obs: Observation) -> Decision:
+        t = {"start": time.perf_counter()}
+        sem_map = self._update_map(obs)
+        t["mapping"] = time.perf_counter()
+        last_move = None
+        if self._prev_action == Action.MOVE_FORWARD and self._prev_pose is not None:
+            last_move = math.hypot(obs.pose.x - self._prev_pose.x, obs.pose.y - self._prev_pose.y)
+
+        if self._escape:
+            self._steps += 1
+            return self._decide(obs, self._escape.pop(), sem_map, self._ltg, "escape",
+                                "escaping: cleared collision marks, random turn then forward", t, None, None)
+        target = self._target_mask(sem_map)
+        override = None
+        frontiers_ms = policy_ms = 0.0
+        if self._manual is not None:
+            goal, kind, reason = self._manual, "manual", f"manual goal {self._manual} set in the dashboard"
+            override = f"manual:{self._manual[0]},{self._manual[1]}"
+        elif target is not None:
+            goal, kind, reason = target, "target", f"{self.goal} seen: heading to it"
+        elif self._steps < self.cfg.look_around_steps:
+            self._steps += 1
+            return self._decide(obs, Action.TURN_LEFT, sem_map, None, "look-around",
+                                "initial 360-degree look", t, None, None)
+        else:
+            if self._since_select >= self.cfg.replan_every or self._ltg is None:
+                frontiers_ms, policy_ms = self._reselect(sem_map)
+            goal, kind, reason = self._ltg, self._ltg_kind, self._ltg_reason
+        t["select"] = time.perf_counter()
+
+        plan = self._plan(sem_map, goal, kind, last_move)
+        if plan.reached and kind in _EXPLORING:
+            # Reached an exploration goal: never come back to it, and pick the next one now rather
+            # than spending this step walking into whatever stands behind it.
+            self._blocked.append(self._ltg)
+            more_f, more_p = self._reselect(sem_map)
+            frontiers_ms, policy_ms = frontiers_ms + more_f, policy_ms + more_p
+            goal, kind, reason = self._ltg, self._ltg_kind, self._ltg_reason
+            plan = self._plan(sem_map, goal, kind, None)
+        t["planning"] = time.perf_counter()
+        self.stuck = plan.stuck
+        action = plan.action
+        self._unreachable = 0 if plan.reachable else self._unreachable + 1
+        if plan.reached and kind == "target":
+            action, reason = Action.STOP, f"{self.goal} within {plan.distance_to_goal_m:.2f} m: stop"
+        elif plan.reached and kind == "manual":
+            self._manual = None
+            self._since_select = math.inf
+        elif plan.reached:
+            self._since_select = math.inf
+        elif self._unreachable >= self.cfg.escape_after_unreachable or plan.stuck:
+            if kind in _EXPLORING:
+                self._blocked.append(self._ltg)
+            self._start_escape()
+            action, reason = self._escape.pop(), "goal unreachable or stuck: clearing collision marks, escaping"
+        self._since_select += 1
+        self._steps += 1
+        return self._decide(obs, action, sem_map, goal if isinstance(goal, tuple) else _centre(goal), kind,
+                            reason, t, plan.short_term_goal, override,
+                            extra_ms={"frontiers": frontiers_ms, "policy": policy_ms})
+
+    # --- pieces ------------------------------------------------------------------------------
+    def _reselect(self, sem_map: SemanticMap) -> tuple[float, float]:
+        """Extract frontiers and let the global policy choose; returns (frontier ms, policy ms)."""
+        t0 = time.perf_counter()
+        self._frontiers = self._extract(sem_map)
+        t1 = time.perf_counter()
+        self._select(sem_map)
+        return (t1 - t0) * 1e3, (time.perf_counter() - t1) * 1e3
+
+    def _plan(self, sem_map: SemanticMap, goal, kind: str, last_move: float | None):
+        radius = self.cfg.stop_distance_m if kind == "target" else self.cfg.frontier_reached_m
+        return self.planner.plan(sem_map.obstacle, sem_map.agent_cell, sem_map.agent_heading, goal,
+                                 last_move_m=last_move, goal_reached_radius_m=radius)
+
+    def _start_escape(self) -> None:
+        self.planner.clear_collisions()
+        self._unreachable = 0
+        self._since_select = math.inf
+        turn = Action.TURN_LEFT if self.rng.random() < 0.5 else Action.TURN_RIGHT
+        moves = [turn] * int(self.rng.integers(1, 7)) + [Action.MOVE_FORWARD] * 2
+        self._escape = moves[::-1]  # popped from the end
+
+    def _update_map(self, obs: Observation) -> SemanticMap:
+        h, w = obs.depth.shape
+        factor = max(1, h // self.cfg.map_input_height)
+        depth, semantic = (obs.depth, obs.semantic) if factor == 1 else downsample_frame(obs.depth, obs.semantic, factor)
+        semantic = self.noise(semantic)
+        if self._mapper is None or self._frame_shape != depth.shape:
+            intr = CameraIntrinsics.from_sim(self.sim, depth.shape[0], depth.shape[1])
+            self._mapper = SemanticMapper(self.cfg.map, intr, self.categories)
+            self._mapper.reset(self._start)
+            self._frame_shape = depth.shape
+        return self._mapper.update(depth, semantic, obs.pose, obs.tilt)
+
+    def _target_mask(self, sem_map: SemanticMap) -> np.ndarray | None:
+        """The largest connected blob of the goal channel, once it has enough cells."""
+        if self.goal not in sem_map.category_names:
+            return None
+        channel = sem_map.category(self.goal)
+        rows, cols = np.nonzero(channel.any(axis=1))[0], np.nonzero(channel.any(axis=0))[0]
+        if len(rows) == 0:
+            return None
+        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        crop = channel[r0:r1, c0:c1].astype(np.uint8)
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(crop, connectivity=8)
+        if n <= 1:
+            return None
+        best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+        if stats[best, cv2.CC_STAT_AREA] < self.cfg.target_min_cells:
+            return None
+        mask = np.zeros_like(channel)
+        mask[r0:r1, c0:c1] = labels == best
+        return mask
+
+    def _extract(self, sem_map: SemanticMap) -> list[Frontier]:
+        # The field must cover every explored cell: frontiers far from any obstacle (the open end of
+        # a corridor) would otherwise read as unreachable and be dropped.
+        rows = np.flatnonzero(sem_map.explored.any(axis=1))
+        cols = np.flatnonzero(sem_map.explored.any(axis=0))
+        last = sem_map.size - 1
+        corners = np.array([[max(rows[0] - 1, 0), max(cols[0] - 1, 0)],
+                            [min(rows[-1] + 1, last), min(cols[-1] + 1, last)]])
+        field_ = self.planner.distance_from_agent(sem_map.obstacle, sem_map.agent_cell, targets=corners).full()
+        frontiers = extract_frontiers(sem_map.explored, sem_map.obstacle, sem_map.agent_cell, field_,
+                                      sem_map.categories, sem_map.category_names, self.cfg.frontier)
+        if self._blocked:
+            blocked = np.array(self._blocked)
+            keep = [f for f in frontiers
+                    if np.min(np.hypot(*(blocked - np.array(f.center)).T)) * sem_map.resolution_m > 1.0]
+            frontiers = keep or frontiers
+        return frontiers
+
+    def _select(self, sem_map: SemanticMap) -> None:
+        self._since_select = 0
+        sel = self.global_policy.select(self._frontiers, sem_map, self.goal, self.rng)
+        if sel is None:  # nothing left to explore: wander to a random free cell of the local map
+            win = sem_map.local_window()
+            free = np.argwhere(~win.obstacle & ~win.explored) if (~win.explored).any() else np.argwhere(~win.obstacle)
+            r, c = free[self.rng.integers(len(free))]
+            self._ltg = (int(r) + win.bounds[0], int(c) + win.bounds[2])
+            self._ltg_kind, self._ltg_frontier = "explore", None
+            self._ltg_reason = "no frontier: exploring a random free cell"
+            return
+        sel = self._commit(sel)
+        self._ltg, self._ltg_frontier = sel.cell, sel.frontier
+        self._ltg_kind = "frontier" if sel.frontier is not None else "random"
+        self._ltg_reason = sel.reason
+
+    def _commit(self, sel: Selection) -> Selection:
+        """Hysteresis: stay with the frontier pursued so far unless the new best is clearly better
+        (re-selecting every 10 steps with position-dependent scores otherwise flips between targets)."""
+        if self._ltg is None or self._ltg_frontier is None or sel.frontier is None or not self._frontiers:
+            return sel
+        centres = np.array([f.center for f in self._frontiers])
+        d = np.hypot(*(centres - np.array(self._ltg)).T)
+        j = int(np.argmin(d))
+        if j == sel.frontier or d[j] > 20:  # same frontier, or the old one is gone (> 1 m away)
+            return sel
+        if sel.scores[sel.frontier] - sel.scores[j] < self.cfg.commitment_margin:
+            f = self._frontiers[j]
+            return Selection(j, f.center, sel.scores, f"kept frontier {f.id} (commitment): {self._ltg_reason}")
+        return sel
+
+    def _decide(self, obs, action, sem_map, ltg, kind, reason, t, stg, override, extra_ms=None) -> Decision:
+        self._prev_pose, self._prev_action = obs.pose, action
+        now = time.perf_counter()
+        timings = {
+            "mapping": (t["mapping"] - t["start"]) * 1e3,
+            "planning": (t["planning"] - t["select"]) * 1e3 if "planning" in t else 0.0,
+            "total": (now - t["start"]) * 1e3,
+        }
+        timings.update(extra_ms or {})
+        return Decision(
+            action=action, reason=reason, map=sem_map, frontiers=self._frontiers, long_term_goal=ltg,
+            goal_kind=kind, chosen_frontier=self._ltg_frontier if kind == "frontier" else None,
+            short_term_goal=stg, override=override, target_seen=kind == "target", stuck=self.stuck,
+            timings_ms=timings,
+        )
+
+
+def _centre(mask: np.ndarray) -> tuple[int, int]:
+    rows, cols = np.nonzero(mask)
+    return int(np.median(rows)), int(np.median(cols))

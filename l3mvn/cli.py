@@ -1,0 +1,321 @@
+"""``l3mvn`` command line: eval, scenes, episodes, render.
+
+Every user error is one line on stderr (``error: ...``) and exit status 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from l3mvn.config import SimConfig, config_dict, config_hash, override
+from l3mvn.errors import L3MVNError
+
+
+def _frame(text: str) -> tuple[int, int]:
+    try:
+        h, w = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"frame size must look like 120x160, got {text!r}") from None
+    if h <= 0 or w <= 0:
+        raise argparse.ArgumentTypeError(f"frame size must be positive, got {text!r}")
+    return h, w
+
+
+def _positive(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a number >= 1, got {v}")
+    return v
+
+
+def _add_sim_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--rule", choices=["semexp", "geodesic"], default="semexp",
+                   help="success rule (default: SemExp's Gibson rule, as in the paper's table)")
+    p.add_argument("--frame", type=_frame, default=None, metavar="HxW",
+                   help="render size (default 480x640; 120x160 is what the mapper consumes)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="override any SimConfig field, e.g. --set max_steps=300")
+
+
+def _add_source_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--dataset", default=None, help="SemExp-format dataset directory (default: procedural houses)")
+    p.add_argument("--split", default="val", help="split name inside --dataset (default: val)")
+    p.add_argument("--houses", type=_positive, default=5, help="procedural houses when no --dataset (default 5)")
+    p.add_argument("--seed", type=int, default=0, help="seed for procedural houses, episodes and policies")
+
+
+def _sim_config(args: argparse.Namespace) -> SimConfig:
+    cfg = SimConfig(success_rule=args.rule)
+    if args.frame:
+        cfg = cfg.with_frame(*args.frame)
+    return override(cfg, args.set)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from l3mvn.policies import POLICY_NAMES
+
+    parser = argparse.ArgumentParser(prog="l3mvn", description="L3MVN Studio: language-guided ObjectNav")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    ev = sub.add_parser("eval", help="run episodes with a policy and report SR / SPL / DTG")
+    _add_source_args(ev)
+    _add_sim_args(ev)
+    ev.add_argument("--policy", required=True, choices=POLICY_NAMES)
+    ev.add_argument("--episodes", type=_positive, default=None, help="run only the first N episodes")
+    ev.add_argument("--episodes-per-house", type=_positive, default=10, help="procedural episodes per house")
+    ev.add_argument("--out", default=None, help="append one JSON line per finished episode here")
+    ev.add_argument("--resume", action="store_true", help="skip episodes already in --out (same policy and config)")
+    ev.add_argument("--json", action="store_true", help="print the summary as one JSON object on the last line")
+    ev.add_argument("--seg-noise", type=float, default=0.0, metavar="P",
+                    help="perception errors: per frame and category, miss / mislabel with probability P")
+    ev.add_argument("--record", action="store_true", help="write a rerun recording per episode to --record-dir")
+    ev.add_argument("--record-dir", default="recordings", help="where --record writes (default recordings/)")
+
+    sc = sub.add_parser("scenes", help="list the scenes and floors of a dataset split")
+    _add_source_args(sc)
+
+    epi = sub.add_parser("episodes", help="episode files")
+    epi_sub = epi.add_subparsers(dest="episodes_command", required=True)
+    gen = epi_sub.add_parser("generate", help="generate episodes for every scene of a split")
+    _add_source_args(gen)
+    gen.add_argument("--out", required=True, help="dataset directory to write <split>/content/*_episodes.json.gz into")
+    gen.add_argument("--per-scene", type=_positive, default=50, help="episodes per scene floor (default 50)")
+    gen.add_argument("--min-distance", type=float, default=1.0, help="min geodesic start distance, m")
+    gen.add_argument("--max-distance", type=float, default=30.0, help="max geodesic start distance, m")
+
+    from app.cli import add_arguments as add_serve_arguments
+    from l3mvn.recording import add_replay_arguments
+
+    add_serve_arguments(sub.add_parser("serve", help="the live web dashboard (viser)"))
+    add_replay_arguments(sub.add_parser("replay", help="open a rerun recording (.rrd) in the rerun viewer"))
+
+    lang = sub.add_parser("language", help="co-occurrence statistics behind the language prior")
+    lang_sub = lang.add_subparsers(dest="language_command", required=True)
+    st = lang_sub.add_parser("stats", help="print p(goal | object), entropy and the informative list")
+    st.add_argument("--min-rooms", type=_positive, default=1, help="hide objects seen in fewer rooms")
+    bs = lang_sub.add_parser("build-stats", help="recompute the shipped co-occurrence JSON from room data")
+    bs.add_argument("--gibson-rooms", default=None, help="gibson_3dsg_rooms.jsonl (default: ../shared when present)")
+    bs.add_argument("--out", default=None, help="where to write (default: the shipped file)")
+    th = sub.add_parser("train-head", help="train the feed-forward language head (split by building)")
+    th.add_argument("--model", default="minilm", help="sentence embedder: minilm (shipped) or a HF name/path")
+    th.add_argument("--out", default=None, help="where to save the head (default: the shipped file for minilm)")
+    th.add_argument("--gibson-rooms", default=None)
+    th.add_argument("--epochs", type=_positive, default=60)
+    th.add_argument("--seed", type=int, default=0)
+
+    rd = sub.add_parser("render", help="write RGB | depth | semantic of one view side by side to a PNG")
+    _add_source_args(rd)
+    _add_sim_args(rd)
+    rd.add_argument("--scene", default=None, help="scene name (default: the first)")
+    rd.add_argument("--floor", type=int, default=0)
+    rd.add_argument("--pose", default=None, metavar="X,Y,HEADING_DEG",
+                    help="camera pose in metres/degrees (default: a random navigable pose)")
+    rd.add_argument("--out", default="frame.png")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "eval":
+            return _cmd_eval(args)
+        if args.command == "scenes":
+            return _cmd_scenes(args)
+        if args.command == "episodes":
+            return _cmd_generate(args)
+        if args.command == "render":
+            return _cmd_render(args)
+        if args.command == "serve":
+            from app.cli import run as run_serve
+
+            return run_serve(args)
+        if args.command == "replay":
+            from l3mvn.recording import run_replay
+
+            return run_replay(args)
+        if args.command == "language":
+            return _cmd_language(args)
+        if args.command == "train-head":
+            return _cmd_train_head(args)
+    except L3MVNError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted: finished episodes are saved", file=sys.stderr)
+        return 130
+    parser.error(f"unknown command {args.command!r}")
+    return 2
+
+
+def _scenes(args: argparse.Namespace):
+    from l3mvn.scenes.procedural import procedural_split
+    from l3mvn.scenes.semexp import load_split
+
+    if args.dataset is None:
+        return "procedural", procedural_split(args.houses, args.seed)
+    return args.dataset, load_split(args.dataset, args.split)
+
+
+def _cmd_scenes(args: argparse.Namespace) -> int:
+    source, scenes = _scenes(args)
+    print(f"{source} / {args.split if args.dataset else '-'}: {len(scenes)} scenes")
+    print(f"{'scene':<22}{'floor':>6}{'size (m)':>14}{'navigable m2':>14}  goals present")
+    for name in sorted(scenes):
+        for floor, s in sorted(scenes[name].items()):
+            h, w = s.shape
+            size = f"{h * s.resolution_m:.1f}x{w * s.resolution_m:.1f}"
+            area = s.navigable.sum() * s.resolution_m**2
+            print(f"{name:<22}{floor:>6}{size:>14}{area:>14.1f}  {', '.join(s.present_goals())}")
+    return 0
+
+
+def _cmd_generate(args: argparse.Namespace) -> int:
+    from l3mvn.episodes import episode_file, generate_episodes, write_episode_file
+    from l3mvn.scenes.semexp import info_path, save_split, to_semexp_channels
+
+    _, scenes = _scenes(args)
+    out = Path(args.out)
+    split_out = out / args.split
+    split_out.mkdir(parents=True, exist_ok=True)
+    maps = split_out / f"{args.split}_info.pbz2"
+    if args.dataset is None:
+        save_split(out, args.split, [to_semexp_channels(f) for fl in scenes.values() for f in fl.values()])
+    elif not maps.exists():
+        src = info_path(args.dataset, args.split).resolve()
+        if src != maps.resolve():
+            maps.symlink_to(src)
+    total = 0
+    for name in sorted(scenes):
+        episodes = []
+        for floor, scene in sorted(scenes[name].items()):
+            episodes += generate_episodes(scene, args.per_scene, seed=args.seed, first_id=len(episodes),
+                                          min_distance_m=args.min_distance, max_distance_m=args.max_distance)
+        write_episode_file(episode_file(out, args.split, name), episodes, scenes[name])
+        total += len(episodes)
+    print(f"wrote {total} episodes for {len(scenes)} scenes to {split_out / 'content'}")
+    return 0
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from l3mvn.datasets import load_episode_set
+    from l3mvn.eval.metrics import format_summary, summarize
+    from l3mvn.eval.runner import (
+        ResultWriter, RunContext, check_resumable, done_keys, iterate_sequential, read_results,
+    )
+    from l3mvn.policies import make_policy
+    from l3mvn.sim.simulator import BuiltinSimulator
+
+    cfg = _sim_config(args)
+    check_resumable(args.out, args.resume)
+    eset = load_episode_set(args.dataset, args.split, houses=args.houses,
+                            episodes_per_house=args.episodes_per_house, seed=args.seed, cfg=cfg)
+    episodes = eset.episodes[: args.episodes] if args.episodes else eset.episodes
+    chash = config_hash(cfg, extra={"policy": args.policy, "seed": args.seed})
+    ctx = RunContext(policy=args.policy, config_hash=chash)
+    previous = read_results(args.out) if args.resume else []
+    skip = done_keys(previous, args.policy, chash)
+    todo = [ep for ep in episodes if ep.key not in skip]
+    results = [r for r in previous if r["key"] in {e.key for e in episodes} and r["key"] in skip]
+    writer = ResultWriter(args.out)
+    print(f"{eset.name}/{eset.split}: {len(episodes)} episodes, {len(todo)} to run, policy {args.policy}, "
+          f"rule {cfg.success_rule}, config {chash}", file=sys.stderr)
+    try:
+        runs = iterate_sequential(
+            todo, lambda ep: BuiltinSimulator(eset.scene_of(ep), cfg),
+            lambda env: make_policy(args.policy, env, args.seed), ctx,
+        )
+        for i, res in enumerate(runs, 1):
+            row = res.to_json()
+            row["config"] = config_dict(cfg)
+            writer.write(row)
+            results.append(row)
+            sr = sum(r["success"] for r in results) / len(results)
+            print(f"[{i}/{len(todo)}] {res.key} {res.goal}: {res.failure} spl={res.spl:.3f} "
+                  f"(running SR {sr:.3f})", file=sys.stderr)
+    finally:
+        writer.close()
+    if not results:
+        raise L3MVNError("no episodes were run")
+    summary = summarize(results)
+    print(format_summary(summary))
+    if args.json:
+        print(json.dumps(_json_safe(summary), sort_keys=True))
+    return 0
+
+
+def _json_safe(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_json_safe(v) for v in obj]
+    return obj
+
+
+def _cmd_language(args: argparse.Namespace) -> int:
+    from l3mvn.language import build_stats_file, load_stats, stats_table
+
+    if args.language_command == "stats":
+        print(stats_table(load_stats(), min_rooms=args.min_rooms))
+        return 0
+    kwargs = {"gibson_rooms": args.gibson_rooms}
+    if args.out:
+        kwargs["out"] = args.out
+    stats = build_stats_file(**kwargs)
+    print(stats_table(stats))
+    return 0
+
+
+def _cmd_train_head(args: argparse.Namespace) -> int:
+    from l3mvn.language import train_head
+
+    metrics = train_head(model=args.model, out=args.out, gibson_rooms=args.gibson_rooms, epochs=args.epochs,
+                         seed=args.seed)
+    print(json.dumps(metrics, indent=2, sort_keys=True, default=str))
+    return 0
+
+
+def _cmd_render(args: argparse.Namespace) -> int:
+    import numpy as np
+    from PIL import Image
+
+    from l3mvn.scenes.semexp import pick_floor
+    from l3mvn.sim.render import Renderer
+    from l3mvn.sim.simulator import random_walkable_pose
+    from l3mvn.sim.types import Pose
+    from l3mvn.sim.world import build_world
+    from l3mvn.viz import colorize_depth, colorize_semantic, side_by_side
+
+    cfg = _sim_config(args)
+    source, scenes = _scenes(args)
+    name = args.scene or sorted(scenes)[0]
+    scene = pick_floor(scenes, name, args.floor, where=str(source))
+    if args.pose:
+        try:
+            x, y, h = (float(v) for v in args.pose.split(","))
+        except ValueError:
+            raise L3MVNError(f"--pose must be X,Y,HEADING_DEG, got {args.pose!r}") from None
+        pose = Pose(x, y, math.radians(h))
+    else:
+        pose = random_walkable_pose(scene, np.random.default_rng(args.seed))
+    frame = Renderer(build_world(scene, cfg), cfg).render(pose, 0.0)
+    panel = side_by_side(frame.rgb, colorize_depth(frame.depth, cfg.max_depth_m),
+                         colorize_semantic(frame.semantic, scene.categories))
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(panel).save(args.out)
+    print(f"wrote {args.out}: {scene.key} at x={pose.x:.2f} y={pose.y:.2f} "
+          f"heading={math.degrees(pose.heading):.0f} deg")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

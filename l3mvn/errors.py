@@ -1,0 +1,9 @@
+"""One exception type for every user-facing problem.
+
+The CLI prints its message as one line and exits non-zero; the server shows it in the UI. Messages
+name the offending file or value and the valid choices.
+"""
+
+
+class L3MVNError(ValueError):
+    """A bad input (file, flag, request) explained in one line."""

@@ -1,0 +1,93 @@
+"""Ground-truth success regions and geodesic distances, computed by Fast Marching on the grid.
+
+Two rules (``SimConfig.success_rule``), and every number says which one it used:
+
+* ``semexp`` (default, behind the paper's Gibson table): success region = goal footprints dilated by a
+  1.0 m disk (straight line, through walls), restricted to reachable traversible cells; the shortest
+  length for SPL is the geodesic distance to that region + 1.0 m.
+* ``geodesic``: success region = traversible cells whose geodesic distance to a goal footprint is
+  <= 1.0 m (paths may cross the agent-radius margin around it); the shortest length is the geodesic
+  distance to that region.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import skfmm
+from scipy import ndimage as ndi
+
+from l3mvn.config import SimConfig
+from l3mvn.errors import L3MVNError
+from l3mvn.scenes.scene import SceneMap
+
+
+def geodesic_field(passable: np.ndarray, sources: np.ndarray, resolution_m: float) -> np.ndarray:
+    """Geodesic distance (metres) from ``sources`` through ``passable`` cells; inf where unreachable."""
+    sources = sources & passable
+    if not sources.any():
+        return np.full(passable.shape, np.inf, dtype=np.float32)
+    phi = np.where(sources, -1.0, 1.0)
+    try:
+        dist = skfmm.distance(np.ma.MaskedArray(phi, ~passable), dx=resolution_m)
+    except ValueError:  # no passable cell borders a source: nothing else is reachable
+        return np.where(sources, 0.0, np.inf).astype(np.float32)
+    out = np.ma.filled(dist.astype(np.float64), np.inf)
+    # skfmm measures from the zero level set, half a cell outside the sources: add it back so a
+    # neighbour of a source is one cell away, as cell-centre distances are.
+    out = np.where(sources, 0.0, np.maximum(out, 0.0) + 0.5 * resolution_m)
+    return out.astype(np.float32)
+
+
+@dataclass(frozen=True, eq=False)
+class GoalRegion:
+    """Where an episode for ``goal`` in ``scene`` succeeds, and distances to it."""
+
+    goal: str
+    rule: str
+    region: np.ndarray
+    distance_m: np.ndarray
+    length_offset_m: float
+    resolution_m: float
+
+    def distance_at(self, x: float, y: float) -> float:
+        r, c = int(math.floor(y / self.resolution_m)), int(math.floor(x / self.resolution_m))
+        h, w = self.distance_m.shape
+        if not (0 <= r < h and 0 <= c < w):
+            return math.inf
+        return float(self.distance_m[r, c])
+
+    def contains(self, x: float, y: float) -> bool:
+        return self.distance_at(x, y) == 0.0
+
+    def shortest_path_length(self, x: float, y: float) -> float:
+        """The ``l`` of SPL from a start point, per this region's rule."""
+        return self.distance_at(x, y) + self.length_offset_m
+
+
+def goal_region(scene: SceneMap, goal: str, cfg: SimConfig) -> GoalRegion:
+    footprint = scene.category_mask(goal)
+    if not footprint.any():
+        raise L3MVNError(
+            f"goal {goal!r} is not present in scene {scene.key}; present goals: {', '.join(scene.present_goals()) or 'none'}"
+        )
+    res = scene.resolution_m
+    trav = scene.traversible
+    radius = int(round(cfg.success_distance_m / res))
+    if cfg.success_rule == "semexp":
+        # Dilation by a disk = a Euclidean distance threshold (a 41x41 structuring element is slow).
+        region = (ndi.distance_transform_edt(~footprint) <= radius) & trav
+        dist = geodesic_field(trav, region, res)
+        offset = cfg.success_distance_m
+    else:
+        # The navmesh keeps an agent radius away from objects: let paths cross that margin to touch it.
+        margin = math.ceil(cfg.agent_radius_m / res) + 1
+        near = ndi.distance_transform_edt(~footprint) <= margin
+        to_object = geodesic_field(trav | near, footprint, res)
+        region = trav & (to_object <= cfg.success_distance_m)
+        dist = geodesic_field(trav, region, res)
+        offset = 0.0
+    return GoalRegion(goal=goal, rule=cfg.success_rule, region=region & np.isfinite(dist),
+                      distance_m=dist, length_offset_m=offset, resolution_m=res)

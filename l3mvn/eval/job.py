@@ -1,0 +1,190 @@
+"""An evaluation run as a small picklable value that any worker process (local or Ray) can execute.
+
+Workers receive the job once and episode keys one at a time; each process loads the episode set once
+and keeps a few environments (one per scene floor) warm, because building a floor's world costs
+~0.1-1 s while an episode costs seconds. Policies are reset per episode and seed themselves from the
+episode, so a key gives the same metrics whichever process runs it and in whatever order.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import socket
+import sys
+import time
+import traceback
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from l3mvn.config import SimConfig, config_dict, config_hash
+from l3mvn.datasets import EpisodeSet, load_episode_set
+from l3mvn.errors import L3MVNError
+from l3mvn.eval.runner import RunContext, run_episode
+from l3mvn.events import EventBus, StepEvent
+from l3mvn.policies import check_policy, make_policy
+from l3mvn.sim.simulator import BuiltinSimulator
+from l3mvn.sim.types import Episode
+
+# Environments kept per process: workers pull episodes in dataset order, so a handful of floors
+# covers what neighbouring workers are on without holding a whole split's worlds in memory.
+ENV_CACHE_SIZE = 4
+
+
+@dataclass(frozen=True)
+class EvalJob:
+    """Everything a worker needs to run any episode of one evaluation."""
+
+    dataset: str | None
+    split: str
+    houses: int
+    episodes_per_house: int
+    seed: int
+    sim: SimConfig
+    policy: str
+    config_hash: str
+
+    @classmethod
+    def create(cls, dataset: str | Path | None, split: str, *, houses: int = 5, episodes_per_house: int = 10,
+               seed: int = 0, sim: SimConfig | None = None, policy: str) -> "EvalJob":
+        """A job whose config hash is the one ``l3mvn eval`` writes (SimConfig + policy + seed)."""
+        sim = sim or SimConfig()
+        chash = config_hash(sim, extra={"policy": policy, "seed": seed})
+        # An absolute path, so workers started elsewhere (Ray) find the same files on a shared disk.
+        source = None if dataset is None else str(Path(dataset).resolve())
+        return cls(source, split, houses, episodes_per_house, seed, sim, policy, chash)
+
+    def load(self) -> EpisodeSet:
+        """The job's episode set, loaded once per process."""
+        return _state(self).episodes
+
+    def keys(self) -> list[str]:
+        return [ep.key for ep in self.load().episodes]
+
+    def run_one(self, key: str) -> dict:
+        """Run one episode and return its result line; any exception becomes an error row."""
+        t0 = time.perf_counter()
+        try:
+            return _state(self).run(key)
+        except Exception as exc:  # a broken episode must not take the run down: report it as a row
+            return error_row(self, key, f"{type(exc).__name__}: {exc}", seconds=time.perf_counter() - t0,
+                             detail=traceback.format_exc(limit=8))
+
+
+def error_row(job: EvalJob, key: str, message: str, *, seconds: float = 0.0, detail: str = "") -> dict:
+    """The line written for an episode that could not be run. It carries no metrics, is left out of
+    summaries, and is retried by ``--resume`` (see ``is_error_row``)."""
+    row = {"key": key, "policy": job.policy, "config_hash": job.config_hash, "error": message,
+           "worker": worker_id(), "timing": {"total_s": round(seconds, 4)}}
+    if detail:
+        row["traceback"] = detail
+    return row
+
+
+def is_error_row(row: dict) -> bool:
+    return "error" in row
+
+
+def worker_id() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process (ru_maxrss is KiB on Linux, bytes on macOS)."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return round(peak / (1024 * 1024 if sys.platform == "darwin" else 1024), 1)
+
+
+# --- per-process state -------------------------------------------------------------------------
+
+class _TimedEnv:
+    """Times the simulator's reset/step (ray casting included) as the session sees it; the policy
+    keeps the bare environment so its own queries are not counted as simulation."""
+
+    def __init__(self, env: BuiltinSimulator) -> None:
+        self._env = env
+        self.seconds = 0.0
+
+    def __getattr__(self, name: str):
+        return getattr(self._env, name)
+
+    def reset(self, episode: Episode):
+        t0 = time.perf_counter()
+        try:
+            return self._env.reset(episode)
+        finally:
+            self.seconds += time.perf_counter() - t0
+
+    def step(self, action):
+        t0 = time.perf_counter()
+        try:
+            return self._env.step(action)
+        finally:
+            self.seconds += time.perf_counter() - t0
+
+
+@dataclass
+class _StageTotals:
+    """Sums Decision.timings_ms over an episode (map-based agents report their stages there)."""
+
+    ms: dict[str, float] = field(default_factory=dict)
+
+    def __call__(self, event: StepEvent) -> None:
+        if event.decision is not None:
+            for stage, value in event.decision.timings_ms.items():
+                self.ms[stage] = self.ms.get(stage, 0.0) + float(value)
+
+
+class _JobState:
+    def __init__(self, job: EvalJob) -> None:
+        self.job = job
+        check_policy(job.policy)
+        self.episodes = load_episode_set(job.dataset, job.split, houses=job.houses,
+                                         episodes_per_house=job.episodes_per_house, seed=job.seed, cfg=job.sim)
+        self.by_key = {ep.key: ep for ep in self.episodes.episodes}
+        self.envs: OrderedDict[str, tuple[BuiltinSimulator, object]] = OrderedDict()
+        self.ctx = RunContext(policy=job.policy, config_hash=job.config_hash)
+
+    def run(self, key: str) -> dict:
+        episode = self.by_key.get(key)
+        if episode is None:
+            raise L3MVNError(f"episode {key!r} is not in {self.episodes.name}/{self.episodes.split}")
+        t0 = time.perf_counter()
+        floor = f"{episode.scene}/{episode.floor}"
+        if floor in self.envs:
+            self.envs.move_to_end(floor)
+        else:
+            env = BuiltinSimulator(self.episodes.scene_of(episode), self.job.sim)
+            self.envs[floor] = (env, make_policy(self.job.policy, env, self.job.seed))
+            while len(self.envs) > ENV_CACHE_SIZE:
+                self.envs.popitem(last=False)
+        env, policy = self.envs[floor]
+        setup_s = time.perf_counter() - t0
+        timed, stages, bus = _TimedEnv(env), _StageTotals(), EventBus()
+        bus.subscribe(stages)
+        t1 = time.perf_counter()
+        result = run_episode(timed, policy, episode, self.ctx, bus=bus)
+        run_s = time.perf_counter() - t1
+        row = result.to_json()
+        row["config"] = config_dict(self.job.sim)
+        row["worker"] = worker_id()
+        row["timing"] = {
+            "total_s": round(setup_s + run_s, 4),
+            "setup_s": round(setup_s, 4),
+            "sim_s": round(timed.seconds, 4),
+            "policy_s": round(run_s - timed.seconds, 4),  # policy and loop bookkeeping
+            "stages_ms": {k: round(v, 3) for k, v in sorted(stages.ms.items())},
+        }
+        row["peak_rss_mb"] = peak_rss_mb()
+        return row
+
+
+_STATES: dict[EvalJob, _JobState] = {}
+
+
+def _state(job: EvalJob) -> _JobState:
+    if job not in _STATES:
+        _STATES.clear()  # one job at a time per process: drop the previous job's worlds
+        _STATES[job] = _JobState(job)
+    return _STATES[job]

@@ -1,0 +1,132 @@
+"""Typed records of frontier extraction: its settings and one scored frontier.
+
+A ``Frontier`` crosses three boundaries: extraction fills the geometry and cost-utility fields, the
+global policy fills the language fields, and step events carry it (via ``to_dict``) to the dashboard
+and the recorder.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from l3mvn.errors import L3MVNError
+
+UTILITY_MODES = ("paper", "official_code")
+EDGE_MODES = ("largest", "all")
+
+
+@dataclass(frozen=True)
+class FrontierConfig:
+    """Every constant of frontier extraction and cost-utility scoring (paper defaults).
+
+    Units: ``*_cells`` in map cells, ``*_m`` in metres. ``cu_lambda`` is in cells of frontier per
+    metre of travel: the default 20 (= 1 / 0.05 m) makes one metre of walking cost as much as one
+    metre of frontier is worth. ``utility="official_code"`` scores ``size + near_bonus`` when the
+    frontier is closer than ``near_bonus_m`` and ignores the cost term; use ``official_code()`` for
+    the code's full setting (top 4). ``edge="largest"`` keeps the contour of the largest explored blob
+    only (the paper); ``"all"`` keeps the outer contour of every explored blob.
+    """
+
+    min_cluster_cells: int = 5
+    min_distance_m: float = 0.5
+    max_distance_m: float = 5.0
+    obstacle_dilation_cells: int = 1
+    cu_lambda: float = 20.0
+    utility: str = "paper"
+    near_bonus: float = 8.0
+    near_bonus_m: float = 3.0
+    top_k: int | None = None
+    edge: str = "largest"
+    window_m: float = 3.0
+    resolution_m: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.utility not in UTILITY_MODES:
+            raise L3MVNError(
+                f"unknown frontier utility {self.utility!r}; choose one of {', '.join(UTILITY_MODES)}"
+            )
+        if self.edge not in EDGE_MODES:
+            raise L3MVNError(f"unknown frontier edge {self.edge!r}; choose one of {', '.join(EDGE_MODES)}")
+        if self.min_cluster_cells < 1:
+            raise L3MVNError(f"min_cluster_cells must be >= 1, got {self.min_cluster_cells}")
+        if self.obstacle_dilation_cells < 0:
+            raise L3MVNError(f"obstacle_dilation_cells must be >= 0, got {self.obstacle_dilation_cells}")
+        if not 0 <= self.min_distance_m < self.max_distance_m:
+            raise L3MVNError(
+                f"frontier distances must satisfy 0 <= min_distance_m < max_distance_m, "
+                f"got {self.min_distance_m} and {self.max_distance_m}"
+            )
+        if self.top_k is not None and self.top_k < 1:
+            raise L3MVNError(f"top_k must be >= 1 or None (keep all), got {self.top_k}")
+        for name in ("cu_lambda", "near_bonus", "near_bonus_m", "window_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise L3MVNError(f"{name} must be a finite number >= 0, got {value}")
+        if not (math.isfinite(self.resolution_m) and self.resolution_m > 0):
+            raise L3MVNError(f"resolution_m must be positive, got {self.resolution_m}")
+
+    @classmethod
+    def official_code(cls, **overrides: Any) -> "FrontierConfig":
+        """The authors' code: utility = size (+8 within 3 m), no cost term, best 4 kept."""
+        settings: dict[str, Any] = {"utility": "official_code", "top_k": 4}
+        settings.update(overrides)
+        return cls(**settings)
+
+    @property
+    def window_cells(self) -> int:
+        """Half size of the objects window, in cells."""
+        return int(round(self.window_m / self.resolution_m))
+
+
+@dataclass
+class Frontier:
+    """One frontier cluster and its candidate goal cell.
+
+    ``cells`` are (row, col) map cells; ``center`` is a cell of the cluster; ``distance_m`` is the
+    geodesic distance from the agent to the centre; ``utility`` and ``cost`` are the two terms of
+    S_CU = utility - lambda * cost and ``s_cu`` is S_CU min-max normalised over the returned frontiers.
+    The language fields stay empty until the global policy scores the frontier.
+    """
+
+    id: int
+    cells: np.ndarray
+    center: tuple[int, int]
+    size: int
+    distance_m: float
+    utility: float
+    cost: float
+    s_cu: float
+    objects: tuple[str, ...] = ()
+    queries: dict[str, str] = field(default_factory=dict)
+    llm_scores: dict[str, float] = field(default_factory=dict)
+    s_llm: float | None = None
+    fused: float | None = None
+    reason: str = ""
+
+    def to_dict(self, cells: bool = False) -> dict[str, Any]:
+        """JSON-friendly summary; the cells shrink to ``bbox`` = [row_min, col_min, row_max, col_max]
+        (inclusive) unless ``cells`` asks for the full (row, col) list."""
+        rows, cols = self.cells[:, 0], self.cells[:, 1]
+        out: dict[str, Any] = {
+            "id": self.id,
+            "center": [int(self.center[0]), int(self.center[1])],
+            "size": int(self.size),
+            "bbox": [int(rows.min()), int(cols.min()), int(rows.max()), int(cols.max())],
+            "distance_m": float(self.distance_m),
+            "utility": float(self.utility),
+            "cost": float(self.cost),
+            "s_cu": float(self.s_cu),
+            "objects": list(self.objects),
+            "queries": dict(self.queries),
+            "llm_scores": {k: float(v) for k, v in self.llm_scores.items()},
+            "s_llm": None if self.s_llm is None else float(self.s_llm),
+            "fused": None if self.fused is None else float(self.fused),
+            "reason": self.reason,
+        }
+        if cells:
+            out["cells"] = self.cells.tolist()
+        return out

@@ -1,0 +1,61 @@
+"""The feed-forward head: sentence embedding -> 3-layer MLP -> logits over the six goals.
+
+Layout of the paper's code (1024-512-256-6 for RoBERTa-large; 384-512-256-6 for MiniLM), BatchNorm
+and ReLU after each hidden layer. Saved as one torch file: ``{"state_dict", "meta"}``, where
+``meta`` names the encoder, goals, sizes, training settings and metrics (see MODEL_CARD.md).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from l3mvn.errors import L3MVNError
+
+DATA_DIR = Path(__file__).resolve().parents[1] / "data" / "language"
+SHIPPED_HEADS = {"minilm": DATA_DIR / "head_minilm.pt"}
+HIDDEN = (512, 256)
+
+
+class GoalHead(nn.Module):
+    def __init__(self, in_dim: int, n_goals: int, hidden: tuple[int, ...] = HIDDEN):
+        super().__init__()
+        layers: list[nn.Module] = []
+        width = in_dim
+        for h in hidden:
+            layers += [nn.Linear(width, h), nn.BatchNorm1d(h), nn.ReLU()]
+            width = h
+        layers.append(nn.Linear(width, n_goals))
+        self.net = nn.Sequential(*layers)
+        self.in_dim, self.n_goals, self.hidden = in_dim, n_goals, tuple(hidden)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
+
+
+def save_head(head: GoalHead, meta: dict, path: str | Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    meta = {**meta, "in_dim": head.in_dim, "n_goals": head.n_goals, "hidden": list(head.hidden)}
+    torch.save({"state_dict": {k: v.detach().cpu() for k, v in head.state_dict().items()}, "meta": meta}, path)
+    return path
+
+
+def load_head(path: str | Path) -> tuple[GoalHead, dict]:
+    """(head in eval mode, meta) from a file written by ``save_head``."""
+    path = Path(path)
+    if not path.exists():
+        raise L3MVNError(f"feed-forward head {path} not found; train one with `l3mvn train-head`")
+    try:
+        blob = torch.load(path, map_location="cpu", weights_only=True)
+        meta = blob["meta"]
+        head = GoalHead(int(meta["in_dim"]), int(meta["n_goals"]), tuple(meta["hidden"]))
+        head.load_state_dict(blob["state_dict"])
+    except (KeyError, RuntimeError, TypeError, ValueError) as exc:
+        raise L3MVNError(f"{path}: not a feed-forward head file ({str(exc).splitlines()[0][:120]})") from None
+    return head.eval(), meta
+
+
+__all__ = ["GoalHead", "HIDDEN", "SHIPPED_HEADS", "save_head", "load_head"]

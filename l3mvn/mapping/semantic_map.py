@@ -1,0 +1,373 @@
+"""Top-down semantic map built from depth, semantic ids and an odometry pose: no simulator needed.
+
+Map frame: the start pose's position sits at the corner between the four centre cells, axes are the
+odometry axes (heading preserved), so a cell is ``(row, col) = (floor(dy / res) + M/2, floor(dx / res)
++ M/2)`` with ``dx, dy`` the offset from the start (see ``l3mvn.sim.types`` for the world frame).
+Heights are measured from the floor the agent stands on (z = 0).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from l3mvn.errors import L3MVNError
+from l3mvn.mapping.projection import CameraIntrinsics, depth_to_points
+from l3mvn.sim.types import Pose
+
+
+@dataclass(frozen=True)
+class MapConfig:
+    """Every constant of map building (spec defaults; 36 m is the Gibson map, use 48 m for large houses).
+
+    Height bands, in metres above the floor: obstacle = [obstacle_min_height_m, camera height +
+    obstacle_above_camera_m]; explored = [floor_min_height_m, obstacle top] (floor points included);
+    categories = [floor_min_height_m, category_max_height_m], deliberately not tied to the obstacle band
+    so an object seen over low furniture or on the floor still registers.
+    """
+
+    resolution_m: float = 0.05
+    map_size_m: float = 36.0
+    local_map_divisor: int = 2
+    obstacle_min_height_m: float = 0.25
+    obstacle_above_camera_m: float = 0.5
+    # Points below this are depth noise or a hole in the floor, not evidence about this floor.
+    floor_min_height_m: float = -0.4
+    # SemExp's voxel grid top: ceiling-mounted or tall objects (a wall TV) still count.
+    category_max_height_m: float = 3.6
+    category_point_threshold: int = 5
+    max_depth_m: float = 5.0
+    # The agent's own body: the cells it stands on are explored even though the camera cannot see them.
+    footprint_radius_m: float = 0.18
+    # Free-space carving: cells between the camera and what it saw are explored too (bearings are
+    # binned this finely across the view; 0 turns it off). Without it, floor nearer than the lowest
+    # image row (1.4 m at tilt 0) stays unexplored and leaves phantom frontiers along every wall.
+    free_space_bins: int = 160
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.resolution_m) and self.resolution_m > 0):
+            raise L3MVNError(f"resolution_m must be positive, got {self.resolution_m}")
+        cells = self.map_size_m / self.resolution_m
+        whole = math.isfinite(cells) and abs(cells - round(cells)) < 1e-6
+        if not (whole and cells >= 2 and round(cells) % 2 == 0):
+            raise L3MVNError(
+                "map_size_m / resolution_m must be an even whole number of cells (e.g. 36 or 48 m at "
+                f"0.05 m), got {self.map_size_m} / {self.resolution_m}"
+            )
+        if self.local_map_divisor < 1 or self.map_cells % self.local_map_divisor:
+            raise L3MVNError(
+                f"local_map_divisor must be >= 1 and divide the {self.map_cells} map cells, "
+                f"got {self.local_map_divisor}"
+            )
+        if not self.floor_min_height_m < self.obstacle_min_height_m:
+            raise L3MVNError("height bands must satisfy floor_min_height_m < obstacle_min_height_m")
+        if not self.floor_min_height_m < self.category_max_height_m:
+            raise L3MVNError("height bands must satisfy floor_min_height_m < category_max_height_m")
+        if not 1 <= self.category_point_threshold <= np.iinfo(np.uint16).max:
+            raise L3MVNError(
+                f"category_point_threshold must lie in 1..65535, got {self.category_point_threshold}"
+            )
+        if not self.max_depth_m > 0:
+            raise L3MVNError(f"max_depth_m must be positive, got {self.max_depth_m}")
+        if not self.footprint_radius_m >= 0:
+            raise L3MVNError(f"footprint_radius_m must be >= 0, got {self.footprint_radius_m}")
+
+    @property
+    def map_cells(self) -> int:
+        return int(round(self.map_size_m / self.resolution_m))
+
+    @property
+    def local_cells(self) -> int:
+        return self.map_cells // self.local_map_divisor
+
+    @property
+    def footprint_radius_cells(self) -> int:
+        return int(math.floor(self.footprint_radius_m / self.resolution_m + 1e-9))
+
+
+@dataclass(frozen=True, eq=False)
+class LocalWindow:
+    """The agent-centred window (clamped to the map): rows ``r0:r1``, cols ``c0:c1``; arrays are views."""
+
+    bounds: tuple[int, int, int, int]
+    obstacle: np.ndarray
+    explored: np.ndarray
+    visited: np.ndarray
+    categories: np.ndarray
+    agent_cell: tuple[int, int]
+
+
+@dataclass(frozen=True, eq=False)
+class SemanticMap:
+    """The map as the rest of the agent sees it. (M, M) / (K, M, M) bool grids, row = y, col = x.
+
+    The arrays are live views of the mapper's state (no per-step copy of a 720x720xK map): they change
+    on the next ``update``; call ``copy()`` to keep a snapshot. ``start_xy`` is the world position of
+    the map centre; ``agent_heading`` is in radians, counter-clockwise from +x.
+    """
+
+    obstacle: np.ndarray
+    explored: np.ndarray
+    visited: np.ndarray
+    categories: np.ndarray
+    category_names: tuple[str, ...]
+    resolution_m: float
+    start_xy: tuple[float, float]
+    agent_cell: tuple[int, int]
+    agent_heading: float
+    local_cells: int
+    footprint_radius_cells: int
+
+    @property
+    def size(self) -> int:
+        return self.obstacle.shape[0]
+
+    @property
+    def current(self) -> np.ndarray:
+        """Current-location channel: the agent's footprint disk (built on demand)."""
+        grid = np.zeros_like(self.obstacle)
+        rr, cc = _footprint_cells(self.agent_cell, self.footprint_radius_cells, self.size)
+        grid[rr, cc] = True
+        return grid
+
+    def in_bounds(self, row: int, col: int) -> bool:
+        return 0 <= row < self.size and 0 <= col < self.size
+
+    def world_to_cell(self, x: float, y: float) -> tuple[int, int]:
+        row, col = _cell(x - self.start_xy[0], y - self.start_xy[1], self.resolution_m, self.size)
+        if not self.in_bounds(row, col):
+            raise L3MVNError(
+                f"world point ({x:.2f}, {y:.2f}) lies off the {self.size}x{self.size} map (cell {row}, {col})"
+            )
+        return row, col
+
+    def cell_to_world(self, row: int, col: int) -> tuple[float, float]:
+        """World (x, y) of the cell's centre."""
+        half = self.size // 2
+        return (
+            self.start_xy[0] + (col - half + 0.5) * self.resolution_m,
+            self.start_xy[1] + (row - half + 0.5) * self.resolution_m,
+        )
+
+    def category(self, name: str) -> np.ndarray:
+        if name not in self.category_names:
+            raise L3MVNError(f"unknown map category {name!r}; valid: {', '.join(self.category_names)}")
+        return self.categories[self.category_names.index(name)]
+
+    def local_window(self) -> LocalWindow:
+        """SemExp's local map: ``local_cells`` square centred on the agent, shifted to stay on the map."""
+        size, n = self.size, self.local_cells
+        r0 = min(max(self.agent_cell[0] - n // 2, 0), size - n)
+        c0 = min(max(self.agent_cell[1] - n // 2, 0), size - n)
+        rows, cols = slice(r0, r0 + n), slice(c0, c0 + n)
+        return LocalWindow(
+            bounds=(r0, r0 + n, c0, c0 + n),
+            obstacle=self.obstacle[rows, cols],
+            explored=self.explored[rows, cols],
+            visited=self.visited[rows, cols],
+            categories=self.categories[:, rows, cols],
+            agent_cell=(self.agent_cell[0] - r0, self.agent_cell[1] - c0),
+        )
+
+    def channels(self) -> np.ndarray:
+        """A (4 + K, M, M) bool copy in SemExp's channel order: obstacle, explored, current, visited,
+        categories (for recorders and dashboards, not for the per-step hot path)."""
+        fixed = np.stack([self.obstacle, self.explored, self.current, self.visited])
+        return np.concatenate([fixed, self.categories], axis=0)
+
+    def copy(self) -> "SemanticMap":
+        return SemanticMap(
+            obstacle=self.obstacle.copy(),
+            explored=self.explored.copy(),
+            visited=self.visited.copy(),
+            categories=self.categories.copy(),
+            category_names=self.category_names,
+            resolution_m=self.resolution_m,
+            start_xy=self.start_xy,
+            agent_cell=self.agent_cell,
+            agent_heading=self.agent_heading,
+            local_cells=self.local_cells,
+            footprint_radius_cells=self.footprint_radius_cells,
+        )
+
+
+class SemanticMapper:
+    """Accumulates frames into a ``SemanticMap``. Feed it plain arrays from any source.
+
+    ``update`` takes depth (H, W) float metres (0 = invalid), semantic (H, W) int ids (0 = background,
+    k = category_names[k - 1]) or None, the odometry pose and the camera tilt in radians.
+    """
+
+    def __init__(self, cfg: MapConfig, intrinsics: CameraIntrinsics, category_names: tuple[str, ...]) -> None:
+        names = tuple(category_names)
+        if len(set(names)) != len(names):
+            raise L3MVNError(f"duplicate map categories in {names}")
+        self.cfg = cfg
+        self.intrinsics = intrinsics
+        self.category_names = names
+        self.obstacle_max_height_m = intrinsics.camera_height_m + cfg.obstacle_above_camera_m
+        if not cfg.obstacle_min_height_m < self.obstacle_max_height_m:
+            raise L3MVNError(
+                f"obstacle band is empty: obstacle_min_height_m {cfg.obstacle_min_height_m} >= camera height "
+                f"+ obstacle_above_camera_m = {self.obstacle_max_height_m}"
+            )
+        m, k = cfg.map_cells, len(names)
+        self._obstacle = np.zeros((m, m), dtype=bool)
+        self._explored = np.zeros((m, m), dtype=bool)
+        self._visited = np.zeros((m, m), dtype=bool)
+        self._categories = np.zeros((k, m, m), dtype=bool)
+        # Saturates at the threshold: only "reached it or not" matters, and it can never overflow.
+        self._counts = np.zeros((k, m, m), dtype=np.uint16)
+        self._start: Pose | None = None
+        self._cell = (m // 2, m // 2)
+        self._heading = 0.0
+
+    @property
+    def map(self) -> SemanticMap:
+        if self._start is None:
+            raise L3MVNError("the mapper has no map yet: call reset(start_pose) first")
+        return SemanticMap(
+            obstacle=self._obstacle,
+            explored=self._explored,
+            visited=self._visited,
+            categories=self._categories,
+            category_names=self.category_names,
+            resolution_m=self.cfg.resolution_m,
+            start_xy=(self._start.x, self._start.y),
+            agent_cell=self._cell,
+            agent_heading=self._heading,
+            local_cells=self.cfg.local_cells,
+            footprint_radius_cells=self.cfg.footprint_radius_cells,
+        )
+
+    def reset(self, start_pose: Pose) -> SemanticMap:
+        """Clear everything; ``start_pose`` becomes the map centre (heading kept as is)."""
+        for grid in (self._obstacle, self._explored, self._visited, self._categories, self._counts):
+            grid.fill(0)
+        self._start = start_pose
+        self._cell = (self.cfg.map_cells // 2, self.cfg.map_cells // 2)
+        self._heading = start_pose.heading
+        self._visited[self._cell] = True
+        self._mark_footprint(self._cell)
+        return self.map
+
+    def update(self, depth: np.ndarray, semantic: np.ndarray | None, pose: Pose, tilt: float) -> SemanticMap:
+        if self._start is None:
+            raise L3MVNError("update() before reset(): call reset(start_pose) first")
+        if not math.isfinite(tilt):
+            raise L3MVNError(f"non-finite camera tilt {tilt}")
+        cfg, size = self.cfg, self.cfg.map_cells
+        dx, dy = pose.x - self._start.x, pose.y - self._start.y
+        cell = _cell(dx, dy, cfg.resolution_m, size)
+        if not (0 <= cell[0] < size and 0 <= cell[1] < size):
+            raise L3MVNError(
+                f"pose ({pose.x:.2f}, {pose.y:.2f}) is ({dx:+.2f}, {dy:+.2f}) m from the start, off the "
+                f"{cfg.map_size_m:g} m map (half width {cfg.map_size_m / 2:g} m); raise MapConfig.map_size_m"
+            )
+        if semantic is not None and semantic.size:
+            lo, hi = int(semantic.min()), int(semantic.max())
+            if lo < 0 or hi > len(self.category_names):
+                raise L3MVNError(
+                    f"semantic ids must lie in 0..{len(self.category_names)} (0 = background, "
+                    f"k = category k - 1 of {self.category_names}); got {lo}..{hi}"
+                )
+
+        relative = Pose(dx, dy, pose.heading)
+        cloud = depth_to_points(depth, self.intrinsics, relative, tilt, semantic, cfg.max_depth_m)
+        self._splat(cloud.points, cloud.labels)
+        self._carve(cloud.points, dx, dy, pose.heading)
+        self._draw_visited(self._cell, cell)
+        self._mark_footprint(cell)
+        self._cell = cell
+        self._heading = pose.heading
+        return self.map
+
+    def _splat(self, points: np.ndarray, labels: np.ndarray) -> None:
+        cfg, size = self.cfg, self.cfg.map_cells
+        half = size // 2
+        cols = np.floor(points[:, 0] / cfg.resolution_m).astype(np.int64) + half
+        rows = np.floor(points[:, 1] / cfg.resolution_m).astype(np.int64) + half
+        z = points[:, 2]
+        keep = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size) & (z >= cfg.floor_min_height_m)
+        flat = rows[keep] * size + cols[keep]
+        z, labels = z[keep], labels[keep]
+
+        below_top = z <= self.obstacle_max_height_m
+        self._explored.reshape(-1)[flat[below_top]] = True
+        self._obstacle.reshape(-1)[flat[below_top & (z >= cfg.obstacle_min_height_m)]] = True
+
+        labelled = (labels > 0) & (z <= cfg.category_max_height_m)
+        if labelled.any():
+            cat_flat = (labels[labelled].astype(np.int64) - 1) * (size * size) + flat[labelled]
+            cells, hits = np.unique(cat_flat, return_counts=True)
+            counts = self._counts.reshape(-1)
+            total = np.minimum(counts[cells].astype(np.int64) + hits, cfg.category_point_threshold)
+            counts[cells] = total
+            self._categories.reshape(-1)[cells[total >= cfg.category_point_threshold]] = True
+
+    def _carve(self, points: np.ndarray, x: float, y: float, heading: float) -> None:
+        """Mark explored along each viewing bearing up to the first obstacle point, or up to the
+        farthest floor point seen on that bearing."""
+        cfg, bins = self.cfg, self.cfg.free_space_bins
+        if bins <= 0 or len(points) == 0:
+            return
+        z = points[:, 2]
+        keep = (z >= cfg.floor_min_height_m) & (z <= self.obstacle_max_height_m)
+        px, py, z = points[keep, 0] - x, points[keep, 1] - y, z[keep]
+        if len(px) == 0:
+            return
+        dist = np.hypot(px, py)
+        bearing = (np.arctan2(py, px) - heading + np.pi) % (2 * np.pi) - np.pi
+        half = math.radians(self.intrinsics.hfov_deg) / 2
+        idx = np.clip(((bearing + half) / (2 * half) * bins).astype(np.int64), 0, bins - 1)
+        obstacle = z >= cfg.obstacle_min_height_m
+        reach = np.zeros(bins)
+        np.maximum.at(reach, idx[~obstacle], dist[~obstacle])
+        nearest = np.full(bins, np.inf)
+        np.minimum.at(nearest, idx[obstacle], dist[obstacle])
+        reach = np.where(np.isfinite(nearest), nearest - cfg.resolution_m, reach)
+        steps = np.arange(int(math.ceil(reach.max() / cfg.resolution_m)) + 1) * cfg.resolution_m
+        if len(steps) < 2:
+            return
+        angles = heading - half + (np.arange(bins) + 0.5) * (2 * half / bins)
+        ok = steps[None, :] < reach[:, None]
+        xs = (x + steps[None, :] * np.cos(angles)[:, None])[ok]
+        ys = (y + steps[None, :] * np.sin(angles)[:, None])[ok]
+        size, half_cells = cfg.map_cells, cfg.map_cells // 2
+        cols = np.floor(xs / cfg.resolution_m).astype(np.int64) + half_cells
+        rows = np.floor(ys / cfg.resolution_m).astype(np.int64) + half_cells
+        inside = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size)
+        self._explored.reshape(-1)[rows[inside] * size + cols[inside]] = True
+
+    def _draw_visited(self, start: tuple[int, int], end: tuple[int, int]) -> None:
+        """Rasterise the step as an 8-connected line so the trajectory has no gaps."""
+        dr, dc = end[0] - start[0], end[1] - start[1]
+        steps = max(abs(dr), abs(dc))
+        t = np.arange(steps + 1) / max(steps, 1)
+        rows = np.rint(start[0] + t * dr).astype(np.int64)
+        cols = np.rint(start[1] + t * dc).astype(np.int64)
+        self._visited[rows, cols] = True
+
+    def _mark_footprint(self, cell: tuple[int, int]) -> None:
+        rr, cc = _footprint_cells(cell, self.cfg.footprint_radius_cells, self.cfg.map_cells)
+        self._explored[rr, cc] = True
+
+
+def _cell(dx: float, dy: float, resolution_m: float, size: int) -> tuple[int, int]:
+    half = size // 2
+    return int(math.floor(dy / resolution_m)) + half, int(math.floor(dx / resolution_m)) + half
+
+
+def _footprint_cells(cell: tuple[int, int], radius: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cells of a disk around ``cell``, clipped to the map."""
+    dr, dc = np.nonzero(_disk(radius))
+    rr, cc = dr - radius + cell[0], dc - radius + cell[1]
+    inside = (rr >= 0) & (rr < size) & (cc >= 0) & (cc < size)
+    return rr[inside], cc[inside]
+
+
+def _disk(radius: int) -> np.ndarray:
+    yy, xx = np.ogrid[-radius : radius + 1, -radius : radius + 1]
+    return (xx * xx + yy * yy) <= radius * radius

@@ -1,0 +1,77 @@
+"""Global policies: which long-term goal to pursue, given the frontiers of the current map.
+
+Each returns a ``Selection``: a frontier (or a free map cell for random sampling) and one score per
+frontier in [0, 1] (higher is better) that the agent uses for commitment: it keeps its current
+frontier unless another one scores clearly higher.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from l3mvn.frontiers import Frontier
+
+
+@dataclass
+class Selection:
+    frontier: int | None  # index into the frontier list, or None for a free-standing cell
+    cell: tuple[int, int]
+    scores: np.ndarray  # one per frontier, in [0, 1]
+    reason: str
+
+
+class GlobalPolicy(Protocol):
+    name: str
+
+    def select(self, frontiers: list[Frontier], sem_map, goal: str, rng: np.random.Generator) -> Selection | None:
+        """None when there is nothing to choose (no frontier)."""
+
+
+def _pick(frontiers: list[Frontier], scores: np.ndarray, reason: str) -> Selection:
+    i = int(np.argmax(scores))
+    return Selection(i, frontiers[i].center, scores, reason.format(f=frontiers[i]))
+
+
+class NearestFrontier:
+    """Yamauchi (1997): the geodesically nearest frontier."""
+
+    name = "frontier"
+
+    def select(self, frontiers, sem_map, goal, rng):
+        if not frontiers:
+            return None
+        d = np.array([f.distance_m for f in frontiers], dtype=np.float64)
+        scores = 1.0 - d / max(d.max(), 1e-9) if len(d) > 1 else np.ones(1)
+        return _pick(frontiers, scores, "nearest frontier ({f.distance_m:.1f} m)")
+
+
+class CostUtility:
+    """The paper's "Exp": the frontier with the highest normalised S_CU = U - lambda C."""
+
+    name = "cost-utility"
+
+    def select(self, frontiers, sem_map, goal, rng):
+        if not frontiers:
+            return None
+        scores = np.array([f.s_cu for f in frontiers], dtype=np.float64)
+        return _pick(frontiers, scores, "highest cost-utility (S_CU {f.s_cu:.2f}, {f.size} cells, {f.distance_m:.1f} m)")
+
+
+class RandomSample:
+    """The paper's "random samples on map": a uniformly random unoccupied cell of the local window."""
+
+    name = "random-sample"
+
+    def select(self, frontiers, sem_map, goal, rng):
+        win = sem_map.local_window()
+        r0, _, c0, _ = win.bounds
+        free = np.argwhere(~win.obstacle)
+        r, c = free[rng.integers(len(free))]
+        cell = (int(r) + r0, int(c) + c0)
+        return Selection(None, cell, np.zeros(len(frontiers)), f"random map cell {cell}")
+
+
+GLOBAL_POLICIES = {p.name: p for p in (NearestFrontier, CostUtility, RandomSample)}

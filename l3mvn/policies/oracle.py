@@ -1,0 +1,83 @@
+"""Ground-truth policies: the shortest-path oracle and the paper's random walk.
+
+The oracle is a check of the simulator and the metrics, not a method: it reads the environment's
+ground truth (a geodesic field over the cells where the agent's centre may stand) and walks downhill.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+
+import numpy as np
+
+from l3mvn.eval.geodesic import geodesic_field
+from l3mvn.sim.simulator import BuiltinSimulator
+from l3mvn.sim.types import Action, Episode, Observation, Pose
+
+_NEIGHBOURS = np.array([(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)])
+
+
+class OraclePolicy:
+    """Follows the ground-truth shortest path to the success region, then stops."""
+
+    name = "oracle"
+    lookahead_cells = 8
+
+    def __init__(self, env: BuiltinSimulator) -> None:
+        self.env = env
+        self._fields: dict[str, np.ndarray] = {}
+        self._field: np.ndarray | None = None
+
+    def reset(self, episode: Episode) -> None:
+        if episode.goal not in self._fields:
+            scene = self.env.scene
+            region = self.env.region(episode.goal).region & scene.walkable
+            self._fields[episode.goal] = geodesic_field(scene.walkable, region, scene.resolution_m)
+        self._field = self._fields[episode.goal]
+
+    def act(self, obs: Observation) -> Action:
+        """Greedy on the true dynamics: of the 360/turn headings, head for the one whose forward
+        move lands lowest on the distance field; move when already facing it."""
+        assert self._field is not None
+        if self.env.in_success_region():
+            return Action.STOP
+        scene, pose = self.env.scene, obs.pose
+        here = self._value(pose.x, pose.y)
+        turn = self.env.cfg.turn_angle_rad
+        n = max(1, round(2 * math.pi / turn))
+        best_k, best_v = 0, here
+        for k in sorted(range(-(n // 2), n - n // 2), key=abs):
+            end, _ = self.env.forward_result(Pose(pose.x, pose.y, pose.heading + k * turn))
+            v = self._value(end.x, end.y)
+            if v < best_v - 1e-6:
+                best_k, best_v = k, v
+        if best_v >= here:
+            # No single move helps (a corner tighter than one step): fall back to the path direction.
+            r, c = scene.cell_of(pose.x, pose.y)
+            tx, ty = scene.cell_center(*self._descend(r, c))
+            err = (math.atan2(ty - pose.y, tx - pose.x) - pose.heading + math.pi) % (2 * math.pi) - math.pi
+            return Action.TURN_LEFT if err > 0 else Action.TURN_RIGHT
+        if best_k == 0:
+            return Action.MOVE_FORWARD
+        return Action.TURN_LEFT if best_k > 0 else Action.TURN_RIGHT
+
+    def _value(self, x: float, y: float) -> float:
+        r, c = self.env.scene.cell_of(x, y)
+        return float(self._field[r, c]) if self.env.scene.in_bounds(r, c) else math.inf
+
+class RandomWalkPolicy:
+    """Uniformly random actions over the full action space (the paper's random-walk baseline)."""
+
+    name = "random-walk"
+
+    def __init__(self, seed: int = 0) -> None:
+        self.seed = seed
+        self._rng = np.random.default_rng(seed)
+
+    def reset(self, episode: Episode) -> None:
+        # Seeded by episode, not by order, so results do not depend on scheduling.
+        self._rng = np.random.default_rng([self.seed, episode.episode_id, zlib.crc32(episode.scene.encode())])
+
+    def act(self, obs: Observation) -> Action:
+        return Action(int(self._rng.integers(len(Action))))

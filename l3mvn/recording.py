@@ -1,0 +1,621 @@
+"""Rerun recordings of episodes: a step-event subscriber that writes one ``.rrd`` per episode, plus
+reading, listing and replaying them.
+
+Entity tree (all on the ``step`` sequence timeline)::
+
+    camera/rgb  camera/depth  camera/semantic          what the agent saw
+    map/semantic  map/frontiers  map/frontier_cells    the agent's map (map-based policies only),
+    map/trajectory  map/agent  map/goal  map/short_term_goal   in map-cell pixels (x = col, y = row)
+    world/agent  world/trajectory  world/goal          the same in metres, in 3D
+    metrics/ground_truth  metrics/timings_ms           one named line per value (SeriesLines)
+    metrics/frontiers
+    log/decisions  log/language  log/episode           text logs
+    episode                                            a markdown card: which episode, its result
+
+Class names and colours come from annotation contexts (``camera`` and ``map``) built with
+``l3mvn.viz.category_palette``, so "bed" has one colour in the camera image, the map and the dashboard.
+Each recorder owns its own ``RecordingStream``, so several episodes can be recorded at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import os
+import re
+import socket
+import subprocess
+import sys
+import threading
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+from rerun.chunk import RrdReader
+
+from l3mvn.errors import L3MVNError
+from l3mvn.events import EventBus, StepEvent
+from l3mvn.sim.types import Episode
+from l3mvn.viz import BACKGROUND_RGB, category_palette
+
+log = logging.getLogger(__name__)
+
+APPLICATION_ID = "l3mvn"
+TIMELINE = "step"
+DEFAULT_WEB_PORT = 9090
+
+# Map classes before the categories, SemExp's visualisation colours (unexplored is white).
+_MAP_CLASSES = (
+    ("unexplored", (255, 255, 255)),
+    ("explored", (235, 235, 235)),
+    ("obstacle", (150, 150, 150)),
+    ("visited", (245, 92, 66)),
+)
+_LOW_SCORE_RGB = np.array([220, 50, 50], np.float32)
+_HIGH_SCORE_RGB = np.array([40, 190, 80], np.float32)
+_AGENT_RGB = (30, 120, 255)
+_GOAL_RGB = (255, 0, 200)
+_NAME_PART = re.compile(r"[^A-Za-z0-9.-]+")
+
+
+# --- file names -----------------------------------------------------------------------------
+def recording_path(recordings_dir: str | Path, dataset: str | Path, scene: str, episode_id: int,
+                   policy: str) -> Path:
+    """``<dir>/<dataset>_<scene>_<episode>_<policy>.rrd``; a dataset path contributes its folder name,
+    and anything but letters, digits, '.' and '-' becomes '-' so the name parses back unambiguously."""
+    parts = [_name_part(Path(str(dataset)).name or str(dataset)), _name_part(scene), str(int(episode_id)),
+             _name_part(policy)]
+    return Path(recordings_dir) / ("_".join(parts) + ".rrd")
+
+
+@dataclass(frozen=True)
+class RecordingInfo:
+    """One ``.rrd`` on disk; the episode fields are None when the name does not follow the pattern."""
+
+    path: Path
+    dataset: str | None
+    scene: str | None
+    episode_id: int | None
+    policy: str | None
+    size_bytes: int
+    mtime: float
+
+    def to_dict(self) -> dict:
+        return {"path": str(self.path), "name": self.path.name, "dataset": self.dataset, "scene": self.scene,
+                "episode_id": self.episode_id, "policy": self.policy, "size_bytes": self.size_bytes,
+                "mtime": self.mtime}
+
+
+def parse_recording_name(path: str | Path) -> tuple[str, str, int, str] | None:
+    """(dataset, scene, episode_id, policy) from a name made by ``recording_path``, else None."""
+    p = Path(path)
+    parts = p.stem.split("_") if p.suffix == ".rrd" else []
+    if len(parts) != 4 or not parts[2].isdigit() or not all(parts):
+        return None
+    return parts[0], parts[1], int(parts[2]), parts[3]
+
+
+def list_recordings(recordings_dir: str | Path) -> list[RecordingInfo]:
+    """Every ``*.rrd`` directly in the folder, newest first (an absent folder has none)."""
+    folder = Path(recordings_dir)
+    if not folder.is_dir():
+        return []
+    out = []
+    for path in folder.glob("*.rrd"):
+        try:
+            st = path.stat()
+        except OSError:  # deleted while listing
+            continue
+        parsed = parse_recording_name(path)
+        dataset, scene, episode_id, policy = parsed if parsed else (None, None, None, None)
+        out.append(RecordingInfo(path, dataset, scene, episode_id, policy, st.st_size, st.st_mtime))
+    return sorted(out, key=lambda r: (-r.mtime, r.path.name))
+
+
+def _name_part(text: str) -> str:
+    part = _NAME_PART.sub("-", str(text)).strip("-")
+    if not part:
+        raise L3MVNError(f"cannot name a recording after {text!r}: it needs a letter or digit")
+    return part
+
+
+# --- reading --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RecordingSummary:
+    """What a ``.rrd`` holds, read back with rerun's own reader."""
+
+    path: Path
+    application_id: str
+    recording_id: str
+    entity_paths: tuple[str, ...]
+    steps: tuple[int, ...]  # distinct values on the ``step`` timeline, sorted
+
+
+def open_recording(path: str | Path) -> RrdReader:
+    """Rerun's reader for ``path``, or L3MVNError naming the file when it is missing or not a recording.
+
+    A recording still being written (or cut off before its footer) is accepted: rerun falls back to
+    scanning the file.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise L3MVNError(f"recording {p} not found" + ("" if not p.exists() else " (not a file)"))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "no footer": expected for a live or interrupted recording
+            reader = RrdReader(p)
+            recordings = reader.recordings()
+    except (RuntimeError, ValueError, OSError) as exc:
+        raise L3MVNError(f"{p} is not a readable rerun recording: {_one_line(exc)}") from None
+    if not recordings:
+        raise L3MVNError(f"{p} holds no rerun recording (only blueprints)")
+    return reader
+
+
+def read_recording(path: str | Path) -> RecordingSummary:
+    """Entity paths and step numbers of the first recording in ``path`` (reads every chunk)."""
+    reader = open_recording(path)
+    entry = reader.recordings()[0]
+    entities: set[str] = set()
+    steps: set[int] = set()
+    try:
+        for chunk in reader.stream(store=entry):
+            entities.add(chunk.entity_path)
+            if TIMELINE in chunk.timeline_names:
+                steps.update(chunk.to_record_batch().column(TIMELINE).to_pylist())
+    except (RuntimeError, ValueError, OSError) as exc:
+        raise L3MVNError(f"{path} is not a readable rerun recording: {_one_line(exc)}") from None
+    entities.discard("/__properties")
+    return RecordingSummary(Path(path), entry.application_id, entry.recording_id, tuple(sorted(entities)),
+                            tuple(sorted(s for s in steps if s is not None)))
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
+
+
+# --- the layout -----------------------------------------------------------------------------
+def default_blueprint() -> rrb.Blueprint:
+    """Cameras and metrics on the left, the map (and 3D world) on the right, logs below."""
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Horizontal(
+                    rrb.Spatial2DView(name="RGB", origin="camera/rgb"),
+                    rrb.Spatial2DView(name="Depth", origin="camera/depth"),
+                    rrb.Spatial2DView(name="Semantic", origin="camera/semantic"),
+                ),
+                rrb.Horizontal(
+                    rrb.TimeSeriesView(name="Ground truth", origin="metrics/ground_truth"),
+                    rrb.TimeSeriesView(name="Timings (ms)", origin="metrics/timings_ms"),
+                    rrb.TimeSeriesView(name="Frontiers", origin="metrics/frontiers"),
+                ),
+                rrb.Tabs(
+                    rrb.TextLogView(name="Decisions", origin="log"),
+                    rrb.TextDocumentView(name="Episode", origin="episode"),
+                ),
+                row_shares=[2, 1, 1],
+            ),
+            rrb.Tabs(
+                rrb.Spatial2DView(name="Map", origin="map"),
+                rrb.Spatial3DView(name="World", origin="world"),
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=True,
+    )
+
+
+# --- the recorder ---------------------------------------------------------------------------
+class Recorder:
+    """A StepEvent subscriber writing one episode to ``path`` (see the module docstring for the tree).
+
+    It never raises into the loop: a failing step is logged once and skipped. The file is finished
+    (flushed, footer written) on the ``done`` event or ``close()``; later events are ignored.
+    """
+
+    def __init__(self, path: str | Path, *, dataset: str, scene: str, episode_id: int, policy: str,
+                 application_id: str = APPLICATION_ID) -> None:
+        self.path = Path(path)
+        self.meta = {"dataset": str(dataset), "scene": scene, "episode_id": int(episode_id), "policy": policy}
+        self._rec = rr.RecordingStream(application_id, send_properties=True)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._rec.save(self.path, default_blueprint=default_blueprint())
+        except (OSError, RuntimeError, ValueError) as exc:
+            raise L3MVNError(f"cannot write recording {self.path}: {_one_line(exc)}") from None
+        self._rec.send_recording_name(f"{Path(str(dataset)).name} {scene} #{episode_id} {policy}")
+        self._lock = threading.Lock()
+        self._closed = False
+        self._unsubscribe = None
+        self._errors = 0
+        self._episode_key: str | None = None
+        self._camera_categories: tuple[str, ...] | None = None
+        self._map_categories: tuple[str, ...] | None = None
+        self._last_map_ids: np.ndarray | None = None
+        self._started = False
+        self._segment = 0
+        self._world_xyz: list[tuple[float, float, float]] = []
+        self._map_xy: list[tuple[float, float]] = []
+        self._last_queries: tuple = ()
+        self._cleared: dict[str, bool] = {}
+        self._last_event_t: float | None = None
+        self._series: dict[str, list[str]] = {}
+        self.log_ms: list[float] = []  # this recorder's own cost per event, for budgets and benchmarks
+
+    @classmethod
+    def for_episode(cls, recordings_dir: str | Path, dataset: str | Path, episode: Episode,
+                    policy: str) -> "Recorder":
+        """A recorder writing to ``recording_path(recordings_dir, dataset, ...)`` for ``episode``."""
+        path = recording_path(recordings_dir, dataset, episode.scene, episode.episode_id, policy)
+        return cls(path, dataset=Path(str(dataset)).name or str(dataset), scene=episode.scene,
+                   episode_id=episode.episode_id, policy=policy)
+
+    def attach(self, bus: EventBus) -> "Recorder":
+        """Subscribe to ``bus``; the recorder unsubscribes itself when it closes."""
+        self._unsubscribe = bus.subscribe(self)
+        return self
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    @property
+    def errors(self) -> int:
+        """Events that failed to record (each was skipped, never raised)."""
+        return self._errors
+
+    def __call__(self, event: StepEvent) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            if self._episode_key is None:
+                self._episode_key = event.episode_key
+            elif event.episode_key != self._episode_key:
+                return  # another episode on a shared bus: not ours
+            t0 = time.perf_counter()
+            try:
+                self._log_event(event)
+            except Exception:  # a recording problem must never end an episode
+                self._errors += 1
+                if self._errors == 1:
+                    log.exception("recorder %s failed at step %d; later failures are counted", self.path,
+                                  event.step)
+            self.log_ms.append((time.perf_counter() - t0) * 1e3)
+            if event.done:
+                self._close_locked()
+
+    def close(self) -> None:
+        """Finish the file (idempotent)."""
+        with self._lock:
+            self._close_locked()
+
+    def _close_locked(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._rec.flush()
+            self._rec.disconnect()  # finalises the file sink: the footer makes the .rrd seekable
+        except Exception:
+            log.exception("could not finish recording %s", self.path)
+        if self._errors > 1:
+            log.warning("recorder %s: %d steps failed to record", self.path, self._errors)
+        if self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+
+    # --- one event ---------------------------------------------------------------------------
+    def _log_event(self, ev: StepEvent) -> None:
+        rec, obs = self._rec, ev.observation
+        rec.set_time(TIMELINE, sequence=int(ev.step))
+        if self._camera_categories != obs.categories:
+            self._log_camera_context(obs.categories)
+        if not self._started:
+            self._log_episode_card(ev)
+            self._started = True
+        if ev.segment != self._segment:
+            self._segment = ev.segment
+            rec.log("log/episode", rr.TextLog(f"segment {ev.segment}: target changed to {ev.goal}", level="WARN"))
+
+        rec.log("camera/rgb", rr.Image(obs.rgb))
+        rec.log("camera/depth", rr.DepthImage(obs.depth, meter=1.0, colormap="turbo"))
+        rec.log("camera/semantic", rr.SegmentationImage(_small_ids(obs.semantic)))
+
+        self._log_world(ev)
+        self._log_metrics(ev)
+        decision = ev.decision
+        if decision is not None:
+            if decision.map is not None:
+                self._log_map(decision)
+            self._log_decision(ev)
+        if ev.done:
+            self._log_result(ev)
+
+    def _log_camera_context(self, categories: tuple[str, ...]) -> None:
+        palette = category_palette(categories)
+        classes = [rr.ClassDescription(info=rr.AnnotationInfo(id=0, label="background", color=BACKGROUND_RGB))]
+        classes += [rr.ClassDescription(info=rr.AnnotationInfo(id=k + 1, label=name, color=tuple(palette[k + 1])))
+                    for k, name in enumerate(categories)]
+        self._rec.log("camera", rr.AnnotationContext(classes), static=True)
+        self._camera_categories = categories
+
+    def _log_map_context(self, names: tuple[str, ...]) -> None:
+        palette = category_palette(names)
+        n = len(_MAP_CLASSES)
+        classes = [rr.ClassDescription(info=rr.AnnotationInfo(id=i, label=label, color=rgb))
+                   for i, (label, rgb) in enumerate(_MAP_CLASSES)]
+        classes += [rr.ClassDescription(info=rr.AnnotationInfo(id=n + k, label=name, color=tuple(palette[k + 1])))
+                    for k, name in enumerate(names)]
+        self._rec.log("map", rr.AnnotationContext(classes), static=True)
+        self._map_categories = names
+
+    def _log_episode_card(self, ev: StepEvent) -> None:
+        m = self.meta
+        text = (f"# {m['scene']} episode {m['episode_id']}\n\n"
+                f"* dataset: `{m['dataset']}`\n* policy: `{m['policy']}`\n* goal: **{ev.goal}**\n"
+                f"* episode key: `{ev.episode_key}`\n")
+        self._rec.log("episode", rr.TextDocument(text, media_type="text/markdown"))
+        self._rec.log("log/episode", rr.TextLog(f"episode {ev.episode_key}: find {ev.goal} ({m['policy']})"))
+
+    def _log_world(self, ev: StepEvent) -> None:
+        rec, pose = self._rec, ev.pose
+        if not self._world_xyz:
+            rec.log("world/agent/body", rr.Arrows3D(origins=[[0.0, 0.0, 0.3]], vectors=[[0.4, 0.0, 0.0]],
+                                                    colors=[_AGENT_RGB]), static=True)
+        rec.log("world/agent", rr.Transform3D(translation=[pose.x, pose.y, 0.0],
+                                              rotation=rr.RotationAxisAngle(axis=[0, 0, 1], radians=pose.heading)))
+        here = (pose.x, pose.y, 0.05)
+        if not self._world_xyz or self._world_xyz[-1] != here:
+            self._world_xyz.append(here)
+            rec.log("world/trajectory", rr.LineStrips3D([self._world_xyz], colors=[_AGENT_RGB]))
+
+    def _log_metrics(self, ev: StepEvent) -> None:
+        now = time.perf_counter()
+        timings = {} if self._last_event_t is None else {"loop": (now - self._last_event_t) * 1e3}
+        self._last_event_t = now
+        if self.log_ms:
+            timings["recorder"] = self.log_ms[-1]
+        if ev.decision is not None:
+            timings.update(ev.decision.timings_ms)
+            if ev.decision.map is not None:
+                self._rec.log("metrics/frontiers", rr.Scalars([float(len(ev.decision.frontiers))]))
+        self._log_series("metrics/ground_truth", ev.ground_truth)
+        self._log_series("metrics/timings_ms", timings)
+
+    def _log_series(self, entity: str, values: dict[str, float]) -> None:
+        """One entity, one named line per key: a key's line index never changes, a missing value is
+        a gap (NaN), and a new key extends the names (one log call per group, not per value)."""
+        keys = self._series.setdefault(entity, [])
+        grown = [k for k in values if k not in keys]
+        if grown:
+            keys.extend(grown)
+            self._rec.log(entity, rr.SeriesLines(names=keys), static=True)
+        if keys:
+            row = [float(values.get(k, math.nan)) for k in keys]
+            self._rec.log(entity, rr.Scalars([v if math.isfinite(v) else math.nan for v in row]))
+
+    def _log_map(self, d) -> None:
+        rec, m = self._rec, d.map
+        if self._map_categories != tuple(m.category_names):
+            self._log_map_context(tuple(m.category_names))
+            self._last_map_ids = None
+        ids = _map_ids(m)
+        if self._last_map_ids is None or not np.array_equal(ids, self._last_map_ids):
+            rec.log("map/semantic", rr.SegmentationImage(ids))
+            self._last_map_ids = ids
+
+        r, c = m.agent_cell
+        here = (c + 0.5, r + 0.5)
+        if not self._map_xy or self._map_xy[-1] != here:
+            self._map_xy.append(here)
+            rec.log("map/trajectory", rr.LineStrips2D([self._map_xy], colors=[_AGENT_RGB], radii=[0.6]))
+        heading = (math.cos(m.agent_heading) * 8.0, math.sin(m.agent_heading) * 8.0)
+        rec.log("map/agent", rr.Points2D([here], colors=[_AGENT_RGB], radii=[3.0]),
+                rr.Arrows2D(origins=[here], vectors=[heading], colors=[_AGENT_RGB]))
+
+        self._log_point("map/goal", d.long_term_goal, 4.0, _GOAL_RGB, f"goal ({d.goal_kind})")
+        self._log_point("map/short_term_goal", d.short_term_goal, 2.0, (255, 160, 0), None)
+        self._log_frontiers(d.frontiers, d.chosen_frontier)
+        if d.long_term_goal is not None:
+            gx, gy = m.cell_to_world(*d.long_term_goal)
+            rec.log("world/goal", rr.Points3D([[gx, gy, 0.1]], colors=[_GOAL_RGB], radii=[0.15]))
+
+    def _log_point(self, entity: str, cell, radius: float, rgb, label: str | None) -> None:
+        if cell is None:
+            self._clear(entity)
+            return
+        self._cleared[entity] = False
+        pos = [(cell[1] + 0.5, cell[0] + 0.5)]
+        self._rec.log(entity, rr.Points2D(pos, colors=[rgb], radii=[radius],
+                                          labels=[label] if label else None))
+
+    def _log_frontiers(self, frontiers: list, chosen: int | None) -> None:
+        if not frontiers:
+            self._clear("map/frontiers")
+            self._clear("map/frontier_cells")
+            return
+        self._cleared["map/frontiers"] = self._cleared["map/frontier_cells"] = False
+        centers = np.array([(f.center[1] + 0.5, f.center[0] + 0.5) for f in frontiers], np.float32)
+        colors = _score_colors(np.array([_score(f) for f in frontiers], np.float32))
+        radii = [4.0 if f.id == chosen else 2.5 for f in frontiers]
+        labels = [_frontier_label(f, f.id == chosen) for f in frontiers]
+        self._rec.log("map/frontiers", rr.Points2D(centers, colors=colors, radii=radii, labels=labels,
+                                                   show_labels=True))
+        cells = np.concatenate([f.cells for f in frontiers])[:, ::-1].astype(np.float32) + 0.5
+        cell_colors = np.repeat(colors, [len(f.cells) for f in frontiers], axis=0)
+        self._rec.log("map/frontier_cells", rr.Points2D(cells, colors=cell_colors, radii=[0.5]))
+        queries = tuple((f.id, tuple(sorted(f.queries.items()))) for f in frontiers if f.queries)
+        if queries and queries != self._last_queries:
+            for f in frontiers:
+                for name, query in f.queries.items():
+                    score = f.llm_scores.get(name)
+                    tail = "" if score is None else f" -> {score:.3f}"
+                    self._rec.log("log/language", rr.TextLog(f"frontier #{f.id} [{name}] {query}{tail}"))
+        self._last_queries = queries
+
+    def _log_decision(self, ev: StepEvent) -> None:
+        d = ev.decision
+        parts = [d.action.name.lower()]
+        if d.goal_kind:
+            parts.append(f"[{d.goal_kind}]")
+        if d.chosen_frontier is not None:
+            parts.append(f"frontier #{d.chosen_frontier}")
+        if d.reason:
+            parts.append(d.reason)
+        if d.override:
+            parts.append(f"(override {d.override})")
+        if d.stuck:
+            parts.append("(stuck)")
+        level = "WARN" if d.override or d.stuck else "INFO"
+        self._rec.log("log/decisions", rr.TextLog(" ".join(parts), level=level))
+
+    def _log_result(self, ev: StepEvent) -> None:
+        res = ev.result or {}
+        keys = ("success", "spl", "dtg", "failure", "steps", "path_length_m", "shortest_path_m")
+        summary = ", ".join(f"{k}={_fmt(res[k])}" for k in keys if k in res)
+        self._rec.log("log/episode", rr.TextLog(f"done: {summary}", level="INFO"))
+        rows = "\n".join(f"| {k} | {_fmt(v)} |" for k, v in res.items() if not isinstance(v, (dict, list)))
+        m = self.meta
+        self._rec.log("episode", rr.TextDocument(
+            f"# {m['scene']} episode {m['episode_id']}\n\n* dataset: `{m['dataset']}`\n* policy: `{m['policy']}`\n"
+            f"* goal: **{ev.goal}**\n\n| result | value |\n|---|---|\n{rows}\n", media_type="text/markdown"))
+
+    def _clear(self, entity: str) -> None:
+        if self._cleared.get(entity) is False:  # only once, and only after something was shown
+            self._rec.log(entity, rr.Clear(recursive=False))
+            self._cleared[entity] = True
+
+
+def _small_ids(ids: np.ndarray) -> np.ndarray:
+    return ids.astype(np.uint8) if ids.size and int(ids.max()) < 256 else ids.astype(np.uint16)
+
+
+def _map_ids(m) -> np.ndarray:
+    """(M, M) class ids of the map: unexplored 0, explored 1, obstacle 2, visited 3, category k at 4 + k.
+
+    Only the bounding box of what is mapped is painted (views, no copies of the K x M x M stack), so
+    a 720x720 map with 15 categories costs well under a millisecond.
+    """
+    n = len(_MAP_CLASSES)
+    ids = np.zeros(m.explored.shape, np.uint8 if n + len(m.category_names) <= 256 else np.uint16)
+    cat_rows = m.categories.any(axis=2)  # (K, M): cheap, reduces along contiguous rows
+    present = np.flatnonzero(cat_rows.any(axis=1))
+    rows = np.flatnonzero(m.explored.any(axis=1) | cat_rows.any(axis=0))
+    if rows.size == 0:
+        return ids
+    r0, r1 = rows[0], rows[-1] + 1
+    band = (slice(r0, r1),)
+    cols = np.flatnonzero(m.explored[band].any(axis=0) | m.categories[:, r0:r1].any(axis=(0, 1)))
+    c0, c1 = cols[0], cols[-1] + 1
+    box = (slice(r0, r1), slice(c0, c1))
+    window = ids[box]
+    window[m.explored[box]] = 1
+    window[m.obstacle[box]] = 2
+    window[m.visited[box]] = 3
+    for k in present:
+        window[m.categories[k][box]] = n + k
+    return ids
+
+
+def _score(f) -> float:
+    for value in (f.fused, f.s_llm, f.s_cu):
+        if value is not None and math.isfinite(value):
+            return float(value)
+    return 0.0
+
+
+def _score_colors(scores: np.ndarray) -> np.ndarray:
+    t = np.clip(scores, 0.0, 1.0)[:, None]
+    return (_LOW_SCORE_RGB * (1 - t) + _HIGH_SCORE_RGB * t).astype(np.uint8)
+
+
+def _frontier_label(f, chosen: bool) -> str:
+    def num(v):
+        return "-" if v is None else f"{v:.2f}"
+
+    mark = "*" if chosen else ""
+    return f"{mark}#{f.id} LLM {num(f.s_llm)} CU {num(f.s_cu)} F {num(f.fused)}"
+
+
+def _fmt(v) -> str:
+    return f"{v:.3f}" if isinstance(v, float) else str(v)
+
+
+# --- replay ---------------------------------------------------------------------------------
+def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``l3mvn replay FILE.rrd [--web] [--port N]``."""
+    parser.add_argument("file", help="a .rrd recording (see recordings/)")
+    parser.add_argument("--web", action="store_true",
+                        help="serve rerun's web viewer over HTTP and print its URL instead of opening a window")
+    parser.add_argument("--port", type=int, default=DEFAULT_WEB_PORT,
+                        help=f"HTTP port of the web viewer with --web (default {DEFAULT_WEB_PORT}); its data "
+                             "port is picked free and printed too")
+
+
+def run_replay(args: argparse.Namespace) -> int:
+    """Open ``args.file`` in rerun's viewer (native, or web with ``--web``); returns its exit status."""
+    path = Path(args.file)
+    open_recording(path)
+    exe = viewer_executable()
+    if args.web:
+        if not 0 < args.port < 65536:
+            raise L3MVNError(f"--port must lie in 1..65535, got {args.port}")
+        if not _port_free(args.port):
+            raise L3MVNError(f"port {args.port} is in use; pick another with --port")
+        grpc = _free_port()
+        cmd = [exe, "--web-viewer", "--web-viewer-port", str(args.port), "--port", str(grpc), str(path)]
+        print(f"serving {path} at {web_viewer_url(args.port, grpc)} (HTTP port {args.port}, data port {grpc}; "
+              "Ctrl-C to stop)", flush=True)
+    else:
+        if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            raise L3MVNError("no display for the native viewer (DISPLAY is unset); use --web to serve it in a browser")
+        cmd = [exe, str(path)]
+    try:
+        return subprocess.call(cmd)
+    except KeyboardInterrupt:
+        return 0
+
+
+def viewer_executable() -> str:
+    """The ``rerun`` viewer binary shipped with rerun-sdk (``rerun_cli``), else one on PATH."""
+    try:
+        import rerun_cli
+
+        bundled = Path(rerun_cli.__file__).parent / ("rerun.exe" if sys.platform.startswith("win") else "rerun")
+        if bundled.is_file():
+            return str(bundled)
+    except ImportError:
+        pass
+    import shutil
+
+    found = shutil.which("rerun")
+    if not found:
+        raise L3MVNError("the rerun viewer binary was not found; reinstall rerun-sdk (pip install rerun-sdk)")
+    return found
+
+
+def web_viewer_url(web_port: int, grpc_port: int, host: str = "127.0.0.1") -> str:
+    from urllib.parse import quote
+
+    return f"http://{host}:{web_port}/?url={quote(f'rerun+http://{host}:{grpc_port}/proxy', safe='')}"
+
+
+def _port_free(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        try:
+            s.bind(("0.0.0.0", port))
+        except OSError:
+            return False
+    return True
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

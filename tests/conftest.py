@@ -1,0 +1,67 @@
+"""Shared fixtures: a tiny SemExp-format dataset drawn in an array, and the optional shared data."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import ndimage as ndi
+
+from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap, disk
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
+
+SHARED = Path(__file__).resolve().parents[2] / "shared"
+GIBSON = SHARED / "data" / "gibson_semexp"
+ROOMS_JSONL = SHARED / "data" / "room_objects" / "gibson_3dsg_rooms.jsonl"
+
+
+def draw_two_room_house(name: str = "Tiny", height: int = 120, width: int = 200) -> SceneMap:
+    """Two 4.5 m rooms joined by a 1.2 m door; a toilet, a bed, a chair and a tv.
+
+    Built like the real maps: free floor eroded by the agent radius (4 cells) gives channel 0.
+    """
+    free = np.zeros((height, width), bool)
+    free[10:100, 10:95] = True  # west room
+    free[10:100, 105:190] = True  # east room
+    free[50:74, 95:105] = True  # door through a 10-cell wall
+    objects = np.zeros((len(GIBSON_CATEGORIES), height, width), bool)
+
+    def put(cat: str, r0: int, r1: int, c0: int, c1: int) -> None:
+        objects[GIBSON_CATEGORIES.index(cat), r0:r1, c0:c1] = True
+
+    put("toilet", 12, 24, 170, 186)  # east room, north-east corner
+    put("bed", 60, 98, 12, 50)  # west room, south-west
+    put("chair", 20, 30, 20, 30)
+    put("tv", 12, 16, 60, 80)
+    put("sink", 12, 20, 150, 164)
+    free &= ~objects.any(0)
+    navigable = ndi.binary_erosion(free, disk(4))
+    return SceneMap(name=name, floor=0, categories=GIBSON_CATEGORIES, navigable=navigable, objects=objects,
+                    origin_cm=(-300.0, -200.0), floor_height_m=0.0)
+
+
+@pytest.fixture
+def tiny_scene() -> SceneMap:
+    return draw_two_room_house()
+
+
+@pytest.fixture
+def tiny_dataset(tmp_path: Path) -> Path:
+    """A SemExp-format dataset directory with one split 'val' holding two tiny houses + episodes."""
+    from l3mvn.episodes import episode_file, generate_episodes, write_episode_file
+    from l3mvn.scenes.semexp import save_split
+
+    scenes = [draw_two_room_house("Tiny"), draw_two_room_house("Wee", height=130, width=210)]
+    save_split(tmp_path, "val", scenes)
+    for s in scenes:
+        eps = generate_episodes(s, 4, seed=1, goals=("toilet", "bed", "chair", "tv"))
+        write_episode_file(episode_file(tmp_path, "val", s.name), eps, {0: s})
+    return tmp_path
+
+
+needs_gibson = pytest.mark.skipif(not (GIBSON / "train" / "train_info.pbz2").exists(),
+                                  reason="../shared Gibson maps not present")

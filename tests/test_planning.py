@@ -1,0 +1,344 @@
+"""Specifications of the local policy (Fast Marching on the agent's map) on hand-made maps."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from l3mvn.errors import L3MVNError
+from l3mvn.planning import LocalPlanner, PlannerConfig, Window, distance_field
+from l3mvn.sim.types import Action
+
+RES = 0.05
+
+
+def _room(size: int = 120) -> np.ndarray:
+    """An empty square room: a one-cell wall all around."""
+    obstacle = np.zeros((size, size), dtype=bool)
+    obstacle[[0, -1], :] = True
+    obstacle[:, [0, -1]] = True
+    return obstacle
+
+
+def _reference_field(planner: LocalPlanner, obstacle: np.ndarray, goal: tuple[int, int]) -> np.ndarray:
+    """Whole-map FMM to the dilated goal, built independently of the planner's windows and cache."""
+    cfg = planner.cfg
+    r = cfg.obstacle_dilation_cells
+    disk = np.hypot(*np.mgrid[-r : r + 1, -r : r + 1]) <= r
+    trav = ~ndimage.binary_dilation(obstacle, disk)
+    if planner.collision_map is not None:
+        trav &= ~planner.collision_map
+    g = cfg.goal_dilation_cells
+    goal_mask = np.zeros_like(obstacle)
+    goal_mask[goal] = True
+    sources = ndimage.binary_dilation(goal_mask, np.hypot(*np.mgrid[-g : g + 1, -g : g + 1]) <= g)
+    return distance_field(trav, sources, resolution_m=cfg.resolution_m)
+
+
+def test_fmm_distance_through_a_door_equals_the_detour_length():
+    trav = np.ones((100, 100), dtype=bool)
+    trav[50, :] = False
+    trav[50, 80] = True  # the door
+    field = distance_field(trav, np.array([[20, 20]]), resolution_m=RES)
+    detour = (math.hypot(50 - 20, 80 - 20) + math.hypot(80 - 50, 80 - 80)) * RES
+    assert field[80, 80] == pytest.approx(detour, abs=RES)
+    assert field[50, 79] == np.inf
+
+
+def test_fmm_limit_stops_the_march_without_changing_nearer_distances():
+    rng = np.random.default_rng(0)
+    trav = rng.random((80, 80)) > 0.2
+    trav[40, 40] = True
+    full = distance_field(trav, np.array([[40, 40]]), resolution_m=RES)
+    limited = distance_field(trav, np.array([[40, 40]]), resolution_m=RES, limit_m=1.0)
+    near = full <= 1.0
+    np.testing.assert_allclose(limited[near], full[near], atol=1e-6)
+    assert np.isinf(limited[~near]).all()
+
+
+def test_fmm_rejects_sources_outside_the_array():
+    with pytest.raises(L3MVNError, match="inside"):
+        distance_field(np.ones((5, 5), dtype=bool), np.array([[9, 0]]), resolution_m=RES)
+
+
+def test_planned_distance_around_a_wall_matches_the_whole_map_field():
+    obstacle = _room(200)
+    obstacle[100, 20:180] = True
+    planner = LocalPlanner()
+    plan = planner.plan(obstacle, (50, 100), 0.0, (150, 100))
+    reference = _reference_field(planner, obstacle, (150, 100))
+    assert plan.reachable
+    assert plan.distance_to_goal_m == pytest.approx(reference[50, 100] + 0.5, abs=1e-4)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_windowed_field_equals_the_whole_map_field_on_random_maps(seed):
+    rng = np.random.default_rng(seed)
+    obstacle = _room(160)
+    obstacle |= ndimage.binary_dilation(rng.random((160, 160)) < 0.004, iterations=3)
+    free = np.argwhere(~ndimage.binary_dilation(obstacle, iterations=6))
+    agent, goal = (tuple(int(v) for v in free[i]) for i in rng.choice(len(free), 2, replace=False))
+    planner = LocalPlanner()
+    plan = planner.plan(obstacle, agent, 0.0, goal)
+    reference = _reference_field(planner, obstacle, goal)
+    window = plan.field.window
+    local = reference[window.slices]
+    values = plan.field.values
+    both = np.isfinite(local) & np.isfinite(values)
+    # A window only removes paths, so it never claims a shorter distance (up to the FMM stencil at
+    # its edge, a few mm); around the agent (all the short-term goal looks at) it is exact, and with
+    # every obstacle inside it (limit inf) exact everywhere.
+    assert (values[both] >= local[both] - 0.1 * RES).all()
+    rows, cols = np.nonzero(both)
+    near = np.hypot(rows + window.r0 - agent[0], cols + window.c0 - agent[1]) <= 20
+    np.testing.assert_allclose(values[rows[near], cols[near]], local[rows[near], cols[near]], atol=1e-4)
+    assert plan.field.at(*agent) == pytest.approx(reference[agent], abs=1e-4)
+    if plan.field.limit_m == math.inf:
+        np.testing.assert_allclose(values[both], local[both], atol=1e-4)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_distance_from_agent_equals_the_whole_map_field_within_its_limit(seed):
+    rng = np.random.default_rng(10 + seed)
+    obstacle = _room(160)
+    obstacle |= ndimage.binary_dilation(rng.random((160, 160)) < 0.004, iterations=3)
+    free = np.argwhere(~ndimage.binary_dilation(obstacle, iterations=6))
+    agent = tuple(int(v) for v in free[rng.integers(len(free))])
+    planner = LocalPlanner()
+    near = planner.distance_from_agent(obstacle, agent, max_distance_m=2.0)
+    everywhere = planner.distance_from_agent(obstacle, agent)
+    full = everywhere.full()
+    assert everywhere.window == Window.full(obstacle.shape)
+    rows, cols = np.nonzero(np.isfinite(full) & (full <= 2.0))
+    np.testing.assert_allclose(near.at(rows, cols), full[rows, cols], atol=1e-4)
+    rows, cols = np.nonzero(full > 2.0)
+    assert np.isinf(near.at(rows, cols)).all()
+
+
+def test_distance_from_agent_covers_the_targets_beyond_the_obstacles():
+    obstacle = np.zeros((300, 300), dtype=bool)
+    obstacle[100:110, 100:110] = True
+    explored = np.zeros_like(obstacle)
+    explored[90:250, 90:120] = True  # explored open floor reaching far below the only obstacle
+    planner = LocalPlanner()
+    field = planner.distance_from_agent(obstacle, (95, 95), targets=explored)
+    assert field.at(240, 110) == pytest.approx(math.hypot(145, 15) * RES, rel=0.02)
+    assert field.at(299, 299) == np.inf  # outside the window: not computed
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_reused_field_gives_the_agent_the_same_distance_as_a_fresh_plan(seed):
+    rng = np.random.default_rng(100 + seed)
+    obstacle = _room(200)
+    agent, goal = (20, 20), (180, 170)
+    cached = LocalPlanner()
+    reused = 0
+    for _ in range(40):
+        # New obstacles appear, some near the agent's path, most far from it.
+        r, c = rng.integers(5, 195, size=2)
+        obstacle[max(r - 2, 1) : r + 3, max(c - 2, 1) : c + 3] = True
+        obstacle[agent[0] - 4 : agent[0] + 5, agent[1] - 4 : agent[1] + 5] = False
+        plan = cached.plan(obstacle, agent, 0.0, goal)
+        fresh = LocalPlanner().plan(obstacle, agent, 0.0, goal)
+        reused += not plan.replanned
+        assert plan.distance_to_goal_m == pytest.approx(fresh.distance_to_goal_m, abs=2 * RES)
+        step = np.subtract(plan.short_term_goal, agent)
+        agent = tuple(int(v) for v in np.add(agent, np.rint(step * 5 / max(np.hypot(*step), 1))))
+    assert reused > 10
+
+
+def test_short_term_goal_stays_on_the_free_side_of_a_wall():
+    obstacle = _room(160)
+    obstacle[80, :] = True
+    obstacle[80, 130:140] = False  # a door far to the right
+    planner = LocalPlanner()
+    plan = planner.plan(obstacle, (72, 40), 0.0, (90, 40))
+    assert plan.reachable
+    assert plan.short_term_goal[0] < 80 - planner.cfg.obstacle_dilation_cells
+    assert plan.short_term_goal[1] > 40  # toward the door
+    assert plan.distance_to_goal_m > (140 - 40) * RES
+
+
+@pytest.mark.parametrize(
+    ("heading_deg", "goal", "expected"),
+    [
+        (0.0, (70, 30), Action.TURN_LEFT),  # goal behind, on the +row (left) side
+        (0.0, (50, 30), Action.TURN_RIGHT),  # goal behind, on the -row (right) side
+        (90.0, (60, 20), Action.TURN_LEFT),  # facing +row; goal toward -col is to the left
+        (90.0, (60, 100), Action.TURN_RIGHT),
+        (0.0, (60 + 7, 100), Action.MOVE_FORWARD),  # 10 deg off: within the threshold
+        (0.0, (60 + 15, 100), Action.TURN_LEFT),  # 20 deg off
+        (0.0, (60 - 15, 100), Action.TURN_RIGHT),
+        (350.0, (60, 100), Action.MOVE_FORWARD),
+    ],
+)
+def test_action_turns_toward_the_goal_and_goes_forward_when_aligned(heading_deg, goal, expected):
+    plan = LocalPlanner().plan(_room(), (60, 60), math.radians(heading_deg), goal)
+    assert plan.action == expected
+
+
+@pytest.mark.parametrize("goal", [(60, 67), (60, 71), (50, 60)])
+def test_short_term_goal_inside_the_dilated_goal_heads_for_the_goal_itself(goal):
+    plan = LocalPlanner().plan(_room(), (60, 60), 0.0, goal)
+    before = math.dist((60, 60), goal)
+    assert math.dist(plan.short_term_goal, goal) < before - 1
+
+
+def test_planner_never_stops_even_on_the_goal():
+    plan = LocalPlanner().plan(_room(), (60, 60), 0.0, (60, 60), goal_reached_radius_m=0.5)
+    assert plan.reached
+    assert plan.action != Action.STOP
+
+
+def test_failed_forward_step_blocks_cells_ahead_and_the_next_plan_goes_around():
+    obstacle = _room()
+    planner = LocalPlanner()
+    first = planner.plan(obstacle, (60, 30), 0.0, (60, 100))
+    assert first.action == Action.MOVE_FORWARD and not first.collided
+    second = planner.plan(obstacle, (60, 30), 0.0, (60, 100), last_move_m=0.02)
+    assert second.collided
+    assert planner.collision_map[60, 32:35].all()
+    assert not planner.collision_map[60, 30]
+    assert second.action in (Action.TURN_LEFT, Action.TURN_RIGHT)
+    assert abs(second.short_term_goal[0] - 60) > 2  # the stg sidesteps the marked cells
+    assert second.distance_to_goal_m > first.distance_to_goal_m
+
+
+def test_forward_step_that_moved_enough_is_not_a_collision():
+    planner = LocalPlanner()
+    plan = planner.plan(_room(), (60, 30), 0.0, (60, 100), last_move_m=0.12)
+    assert not plan.collided
+    assert not planner.collision_map.any()
+
+
+def test_repeated_collisions_raise_stuck():
+    cfg = PlannerConfig(stuck_collisions=5, stuck_window_steps=50)
+    planner = LocalPlanner(cfg)
+    flags = [
+        planner.plan(_room(), (60, 30), 0.0, (60, 100), last_move_m=0.0).stuck for _ in range(5)
+    ]
+    assert flags == [False, False, False, False, True]
+
+
+def test_no_progress_over_the_window_raises_stuck():
+    cfg = PlannerConfig(stuck_window_steps=10, stuck_collisions=10, stuck_min_displacement_m=0.5)
+    planner = LocalPlanner(cfg)
+    flags = [planner.plan(_room(), (60, 30 + i % 2), 0.0, (60, 100)).stuck for i in range(10)]
+    assert flags == [False] * 9 + [True]
+    planner.reset()
+    assert not planner.plan(_room(), (60, 30), 0.0, (60, 100)).stuck
+
+
+def test_unreachable_goal_is_reported_and_the_agent_heads_to_the_nearest_reachable_cell():
+    obstacle = _room()
+    obstacle[40:81, 80] = True
+    obstacle[40:81, 110] = True
+    obstacle[40, 80:111] = True
+    obstacle[80, 80:111] = True  # a closed box around the goal
+    planner = LocalPlanner()
+    plan = planner.plan(obstacle, (60, 30), 0.0, (60, 95))
+    assert not plan.reachable and not plan.reached
+    assert plan.distance_to_goal_m == math.inf
+    assert plan.action == Action.MOVE_FORWARD
+    assert plan.short_term_goal[1] > 30
+
+
+def test_agent_inside_dilated_obstacles_can_still_move_out():
+    obstacle = _room()
+    obstacle[:, 58] = True  # a wall 2 cells to the agent's right (-col side)
+    planner = LocalPlanner()
+    plan = planner.plan(obstacle, (60, 60), math.pi / 2, (60, 100))
+    assert plan.reachable
+    assert plan.short_term_goal[1] > 60
+    assert plan.action == Action.TURN_RIGHT  # facing +row, the goal lies toward +col
+
+
+def test_reached_is_true_only_within_the_radius():
+    planner = LocalPlanner()
+    assert planner.plan(_room(), (60, 60), 0.0, (60, 66), goal_reached_radius_m=0.5).reached
+    assert not planner.plan(_room(), (60, 60), 0.0, (60, 76), goal_reached_radius_m=0.5).reached
+    assert planner.plan(_room(), (60, 60), 0.0, (60, 76), goal_reached_radius_m=1.0).reached
+
+
+def test_bad_inputs_raise_clear_errors():
+    planner = LocalPlanner()
+    with pytest.raises(L3MVNError, match="bool"):
+        planner.plan(_room().astype(np.uint8), (60, 60), 0.0, (60, 70))
+    with pytest.raises(L3MVNError, match="outside"):
+        planner.plan(_room(), (600, 60), 0.0, (60, 70))
+    with pytest.raises(L3MVNError, match="empty"):
+        planner.plan(_room(), (60, 60), 0.0, np.zeros((120, 120), dtype=bool))
+    with pytest.raises(L3MVNError, match="reset"):
+        planner.plan(_room(100), (60, 60), 0.0, (60, 70))
+    with pytest.raises(L3MVNError, match="positive"):
+        PlannerConfig(stg_lookahead_m=0.0)
+
+
+def _drive(obstacle: np.ndarray, start: tuple[float, float, float], goal: tuple[int, int], steps: int):
+    """A 2D kinematic agent (0.25 m steps, 30 deg turns, 0.18 m disk) driven by the planner."""
+    clearance = ndimage.distance_transform_edt(~obstacle) * RES
+    x, y, heading = start
+    planner = LocalPlanner()
+    last_move = None
+    for step in range(steps):
+        cell = (int(y / RES), int(x / RES))
+        plan = planner.plan(obstacle, cell, heading, goal, last_move_m=last_move)
+        assert plan.action != Action.STOP
+        if plan.reached:
+            return step, planner
+        last_move = None
+        if plan.action == Action.TURN_LEFT:
+            heading += math.radians(30)
+        elif plan.action == Action.TURN_RIGHT:
+            heading -= math.radians(30)
+        elif plan.action == Action.MOVE_FORWARD:
+            x0, y0 = x, y
+            for _ in range(5):
+                nx, ny = x + 0.05 * math.cos(heading), y + 0.05 * math.sin(heading)
+                if clearance[int(ny / RES), int(nx / RES)] < 0.18:
+                    break
+                x, y = nx, ny
+            last_move = math.hypot(x - x0, y - y0)
+    raise AssertionError(f"goal not reached in {steps} steps")
+
+
+def test_closed_loop_agent_reaches_a_goal_through_a_door():
+    obstacle = _room(160)
+    obstacle[:, 80] = True
+    obstacle[110:130, 80] = False  # the door
+    obstacle[30:60, 40] = True  # a pillar on the way
+    steps, planner = _drive(obstacle, (1.0, 1.0, 0.0), (20, 140), steps=150)
+    # The shortest path is ~10.8 m (43 forward steps) plus ~6 turns; the 30-degree headings make the
+    # agent zig-zag on diagonals (SemExp's rule), so allow twice that.
+    assert steps < 100
+    assert planner.fmm_runs < steps
+
+
+def test_closed_loop_agent_gets_around_an_obstacle_missing_from_its_map():
+    true_map = _room(120)
+    true_map[50:70, 60:63] = True  # the planner never sees this wall
+    clearance = ndimage.distance_transform_edt(~true_map) * RES
+    x, y, heading = 1.5, 3.0, 0.0
+    planner = LocalPlanner()
+    last_move = None
+    for _ in range(150):
+        cell = (int(y / RES), int(x / RES))
+        plan = planner.plan(_room(120), cell, heading, (60, 100), last_move_m=last_move)
+        if plan.reached:
+            break
+        last_move = None
+        if plan.action == Action.MOVE_FORWARD:
+            x0, y0 = x, y
+            for _ in range(5):
+                nx, ny = x + 0.05 * math.cos(heading), y + 0.05 * math.sin(heading)
+                if clearance[int(ny / RES), int(nx / RES)] < 0.18:
+                    break
+                x, y = nx, ny
+            last_move = math.hypot(x - x0, y - y0)
+        else:
+            heading += math.radians(30 if plan.action == Action.TURN_LEFT else -30)
+    assert plan.reached
+    assert planner.collision_map.any()

@@ -1,0 +1,202 @@
+"""Rerun recordings: the real loop writes an .rrd that rerun's own reader reads back."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import re
+import time
+
+import numpy as np
+import pytest
+import rerun as rr
+from rerun.chunk import RrdReader
+
+from l3mvn.config import SimConfig
+from l3mvn.episodes import generate_episodes
+from l3mvn.errors import L3MVNError
+from l3mvn.events import EventBus
+from l3mvn.policies import make_policy
+from l3mvn.recording import (
+    Recorder, add_replay_arguments, list_recordings, open_recording, parse_recording_name, read_recording,
+    recording_path, run_replay,
+)
+from l3mvn.session import EpisodeSession
+from l3mvn.sim.simulator import BuiltinSimulator
+from l3mvn.sim.types import Action
+
+MAX_STEPS = 15
+CAMERA = {"/camera", "/camera/rgb", "/camera/depth", "/camera/semantic"}
+ALWAYS = CAMERA | {"/world/agent", "/world/trajectory", "/metrics/ground_truth", "/metrics/timings_ms",
+                   "/log/decisions", "/log/episode", "/episode"}
+MAP = {"/map", "/map/semantic", "/map/trajectory", "/map/agent", "/map/goal", "/map/frontiers",
+       "/map/frontier_cells", "/metrics/frontiers", "/world/goal"}
+
+
+@pytest.fixture(autouse=True)
+def strict_rerun():
+    """Rerun normally turns a bad log call into a warning; make it an error so the recorder counts it."""
+    before = rr.strict_mode()
+    rr.set_strict_mode(True)
+    yield
+    rr.set_strict_mode(before)
+
+
+@pytest.fixture
+def env(tiny_scene):
+    cfg = dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=MAX_STEPS)
+    return BuiltinSimulator(tiny_scene, cfg)
+
+
+def _episode(env, goal="toilet"):
+    return generate_episodes(env.scene, 1, seed=3, goals=(goal,))[0]
+
+
+def _record(env, policy_name, tmp_path, policy=None):
+    episode = _episode(env)
+    bus = EventBus()
+    recorder = Recorder.for_episode(tmp_path, "tiny_ds", episode, policy_name).attach(bus)
+    session = EpisodeSession(env, policy or make_policy(policy_name, env), policy_name=policy_name,
+                             config_hash="test", bus=bus)
+    session.start(episode)
+    result = session.run()
+    return recorder, result, bus
+
+
+def _values(path, entity, column):
+    """Every value of one component column of one entity, read with rerun's own reader."""
+    out = []
+    for chunk in RrdReader(path).stream():
+        if chunk.entity_path == entity and column in chunk.to_record_batch().schema.names:
+            out += [v for row in chunk.to_record_batch().column(column).to_pylist() for v in (row or [])]
+    return out
+
+
+def test_oracle_episode_records_camera_world_metrics_and_one_row_per_step_without_map(env, tmp_path):
+    recorder, result, bus = _record(env, "oracle", tmp_path)
+
+    assert recorder.closed and recorder.errors == 0 and len(bus) == 0  # closed on done, unsubscribed
+    summary = read_recording(recorder.path)
+    assert summary.application_id == "l3mvn"
+    assert ALWAYS <= set(summary.entity_paths)
+    assert not any(p.startswith("/map") for p in summary.entity_paths)  # no map: no map entities
+    assert result.steps == MAX_STEPS
+    assert summary.steps == tuple(range(MAX_STEPS + 1))  # the reset event is step 0
+    decisions = _values(recorder.path, "/log/decisions", "TextLog:text")
+    assert len(decisions) == MAX_STEPS
+    assert all(d.split()[0] in {a.name.lower() for a in Action} for d in decisions)
+
+
+def test_map_agent_episode_records_map_frontiers_goal_and_trajectory(env, tmp_path):
+    from l3mvn.agent import AgentConfig
+
+    policy = make_policy("frontier", env, agent_cfg=AgentConfig(look_around_steps=2))
+    recorder, result, _ = _record(env, "frontier", tmp_path, policy)
+
+    assert recorder.errors == 0
+    summary = read_recording(recorder.path)
+    assert ALWAYS | MAP <= set(summary.entity_paths)
+    assert summary.steps == tuple(range(result.steps + 1))
+    assert open_recording(recorder.path).blueprints()  # the default layout travels with the file
+    assert recorder.path == tmp_path / "tiny-ds_Tiny_0_frontier.rrd"
+    labels = _values(recorder.path, "/map/frontiers", "Points2D:labels")
+    assert labels and all(re.fullmatch(r"\*?#\d+ LLM \S+ CU \d\.\d\d F \S+", label) for label in labels)
+    assert any(label.startswith("*") for label in labels)  # the chosen frontier is marked
+
+
+def test_two_recordings_written_concurrently_stay_separate(env, tiny_scene, tmp_path):
+    other_env = BuiltinSimulator(tiny_scene, env.cfg)
+    episodes = [_episode(env, "toilet"), _episode(other_env, "bed")]
+    sessions, recorders = [], []
+    for e, ep, name in zip((env, other_env), episodes, ("random-walk", "oracle")):
+        bus = EventBus()
+        recorders.append(Recorder.for_episode(tmp_path, "tiny", ep, name).attach(bus))
+        sessions.append(EpisodeSession(e, make_policy(name, e), policy_name=name, config_hash="t", bus=bus))
+        sessions[-1].start(ep)
+    while not all(s.done for s in sessions):  # interleave the two loops step by step
+        for s in sessions:
+            if not s.done:
+                s.step()
+
+    for s, rec in zip(sessions, recorders):
+        summary = read_recording(rec.path)
+        assert rec.errors == 0
+        assert summary.steps == tuple(range(s.result.steps + 1))
+    assert read_recording(recorders[0].path).recording_id != read_recording(recorders[1].path).recording_id
+
+
+def test_a_failing_event_is_counted_not_raised_and_the_file_still_closes(env, tmp_path):
+    episode = _episode(env)
+    bus = EventBus()
+    recorder = Recorder.for_episode(tmp_path, "tiny", episode, "random-walk").attach(bus)
+    session = EpisodeSession(env, make_policy("random-walk", env), policy_name="random-walk", config_hash="t",
+                             bus=bus)
+    first = session.start(episode)
+    broken = dataclasses.replace(first, step=1, observation=dataclasses.replace(
+        first.observation, rgb=np.zeros((2, 3, 4, 5), np.uint8)))
+    recorder(broken)  # called directly: the bus would swallow an exception, the recorder must not raise one
+    assert recorder.errors == 1
+    recorder.close()
+    assert recorder.closed and read_recording(recorder.path).steps  # what was logged is readable
+
+
+def test_recording_path_follows_the_pattern_and_parses_back(tmp_path):
+    path = recording_path(tmp_path / "recordings", "/data/gibson_semexp", "Collierville", 7, "cost-utility")
+    assert path == tmp_path / "recordings" / "gibson-semexp_Collierville_7_cost-utility.rrd"
+    assert parse_recording_name(path) == ("gibson-semexp", "Collierville", 7, "cost-utility")
+    assert parse_recording_name(tmp_path / "holiday.rrd") is None
+    with pytest.raises(L3MVNError, match="cannot name a recording"):
+        recording_path(tmp_path, "ds", "___", 1, "oracle")
+
+
+def test_list_recordings_parses_names_newest_first_and_keeps_foreign_files(tmp_path):
+    old = recording_path(tmp_path, "procedural", "house-3", 2, "oracle")
+    new = recording_path(tmp_path, "procedural", "house-4", 0, "frontier")
+    foreign = tmp_path / "my_run.rrd"
+    for i, p in enumerate((old, foreign, new)):
+        p.write_bytes(b"x" * (i + 1))
+        os.utime(p, (time.time() - 100 + i, time.time() - 100 + i))
+    (tmp_path / "notes.txt").write_text("not a recording")
+
+    infos = list_recordings(tmp_path)
+    assert [i.path for i in infos] == [new, foreign, old]
+    assert (infos[0].dataset, infos[0].scene, infos[0].episode_id, infos[0].policy) == (
+        "procedural", "house-4", 0, "frontier")
+    assert infos[0].size_bytes == 3 and infos[1].policy is None
+    assert list_recordings(tmp_path / "absent") == []
+
+
+def test_a_recording_that_cannot_be_written_is_refused_up_front(tmp_path):
+    blocker = tmp_path / "recordings"
+    blocker.write_text("a file where the folder should be")
+    with pytest.raises(L3MVNError, match="cannot write recording"):
+        Recorder(blocker / "x.rrd", dataset="d", scene="s", episode_id=0, policy="oracle")
+
+
+def _replay_args(*argv):
+    parser = argparse.ArgumentParser()
+    add_replay_arguments(parser)
+    return parser.parse_args(list(argv))
+
+
+def test_replay_rejects_a_corrupt_recording_naming_the_file(tmp_path):
+    bad = tmp_path / "broken.rrd"
+    bad.write_bytes(b"definitely not a rerun file")
+    with pytest.raises(L3MVNError, match="broken.rrd is not a readable rerun recording"):
+        run_replay(_replay_args(str(bad), "--web"))
+
+
+def test_replay_rejects_a_missing_recording_naming_the_file(tmp_path):
+    with pytest.raises(L3MVNError, match="nothere.rrd not found"):
+        run_replay(_replay_args(str(tmp_path / "nothere.rrd")))
+
+
+def test_a_recording_cut_off_mid_write_is_reported_as_unreadable(env, tmp_path):
+    recorder, _, _ = _record(env, "random-walk", tmp_path)
+    data = recorder.path.read_bytes()
+    cut = tmp_path / "cut.rrd"
+    cut.write_bytes(data[: len(data) // 2])
+    open_recording(recorder.path)
+    with pytest.raises(L3MVNError, match="cut.rrd"):
+        read_recording(cut)

@@ -1,0 +1,144 @@
+"""The 3D world built from a map: where walls go, how objects stand, how big the mesh is."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage as ndi
+
+from l3mvn.config import SimConfig
+from l3mvn.scenes.scene import SceneMap, disk
+from l3mvn.sim.world import build_world, category_profile, wall_grids
+
+from conftest import GIBSON, needs_gibson
+
+# Two rooms split by a one-cell wall at column 56 with a door in rows 23..36, a bed against the
+# north wall, a free-standing toilet, and a one-cell map speck in the west room.
+H, W = 60, 120
+WALL_COL = 56
+BED = (slice(4, 20), slice(10, 30))
+TOILET = (slice(40, 48), slice(90, 98))
+SPECK = (40, 40)
+CATEGORIES = ("bed", "toilet")
+
+
+def two_rooms(categories: tuple[str, ...] = CATEGORIES, extra: dict | None = None) -> SceneMap:
+    """Navmesh drawn directly, so the free floor (navmesh + 2 cells) has known straight edges."""
+    nav = np.zeros((H, W), bool)
+    nav[6:54, 6:54] = True  # west room: free floor rows/cols 4..55
+    nav[6:54, 59:114] = True  # east room: free floor cols 57..115
+    nav[25:35, 53:60] = True  # door through the wall at column 56
+    objects = np.zeros((len(categories), H, W), bool)
+    masks = {"bed": BED, "toilet": TOILET, **(extra or {})}
+    for k, name in enumerate(categories):
+        objects[k][masks[name]] = True
+    # Real maps erode the navmesh by ~4 cells around objects; the map noise is a hole in it.
+    nav &= ~ndi.binary_dilation(objects.any(0), disk(4))
+    hole = np.zeros((H, W), bool)
+    hole[SPECK] = True
+    nav &= ~ndi.binary_dilation(hole, disk(3))
+    return SceneMap(name="TwoRooms", floor=0, categories=categories, navigable=nav, objects=objects)
+
+
+def test_walls_never_cover_free_floor_or_object_footprints():
+    scene = two_rooms()
+    world = build_world(scene, SimConfig())
+    assert not (world.walls & scene.free).any()
+    assert not (world.walls & scene.object_any).any()
+    assert not (world.furniture & (scene.free | scene.object_any)).any()
+
+
+def test_ring_between_object_and_free_floor_is_floor_not_wall():
+    scene = two_rooms()
+    walls, _ = wall_grids(scene)
+    toilet = np.zeros((H, W), bool)
+    toilet[TOILET] = True
+    ring = ndi.binary_dilation(toilet, disk(3)) & ~toilet
+    assert (ring & ~scene.free).any(), "the test map must have an eroded ring to clean"
+    assert not (walls & ring).any()
+
+
+def test_real_wall_behind_an_object_is_kept():
+    walls, _ = wall_grids(two_rooms())
+    assert walls[0:4, BED[1]].all()
+
+
+def test_one_cell_speck_is_removed_but_one_cell_wall_between_rooms_is_kept():
+    scene = two_rooms()
+    assert not scene.free[SPECK] and not scene.object_any[SPECK], "the map must contain the speck"
+    walls, _ = wall_grids(scene)
+    assert not walls[SPECK]
+    assert walls[4:23, WALL_COL].all() and walls[37:56, WALL_COL].all()
+    assert not walls[6:54, WALL_COL - 1].any() and not walls[6:54, WALL_COL + 1].any()  # one cell thick
+    assert not walls[23:37, WALL_COL].any()  # the door
+
+
+def test_mesh_triangles_are_typed_and_categories_follow_scene_order():
+    scene = two_rooms()
+    world = build_world(scene, SimConfig())
+    m = world.num_triangles
+    assert world.vertices.dtype == np.float32 and world.vertices.shape[1] == 3
+    assert world.triangles.shape == (m, 3) and world.triangles.max() < len(world.vertices)
+    assert world.tri_category.shape == (m,) and world.tri_color.shape == (m, 3)
+    assert 0.0 <= world.tri_color.min() and world.tri_color.max() <= 1.0
+    assert set(np.unique(world.tri_category)) == {0, 1, 2}
+    bed_z = world.vertices[world.triangles[world.tri_category == 1]][..., 2]
+    assert bed_z.min() == 0.0 and bed_z.max() == pytest.approx(0.6)
+    assert world.vertices[:, 2].max() == pytest.approx(SimConfig().wall_height_m)
+
+
+def test_small_items_sit_on_the_furniture_below_them_and_unknown_names_get_a_default_height():
+    table = (slice(40, 50), slice(20, 40))
+    cup = (slice(44, 46), slice(24, 26))
+    gadget = (slice(10, 14), slice(80, 84))
+    scene = two_rooms(("dining-table", "cup", "gadget"), {"dining-table": table, "cup": cup, "gadget": gadget})
+    world = build_world(scene, SimConfig())
+    z = lambda cat: world.vertices[world.triangles[world.tri_category == cat]][..., 2]  # noqa: E731
+    assert z(1).max() == pytest.approx(0.75)
+    assert z(2).min() == pytest.approx(0.75) and z(2).max() == pytest.approx(0.75 + category_profile("cup").height)
+    assert z(3).max() == pytest.approx(0.8)
+    assert category_profile("Dining_Table") == category_profile("dining-table")
+
+
+def test_overlapping_floor_standing_categories_keep_one_box_per_cell():
+    chair = (slice(42, 46), slice(36, 44))  # pushed half under the table
+    table = (slice(40, 50), slice(20, 40))
+    scene = two_rooms(("dining-table", "chair"), {"dining-table": table, "chair": chair})
+    world = build_world(scene, SimConfig())
+    tops = world.tri_normal[:, 2] > 0.5
+    tri = world.vertices[world.triangles]
+    table_top_area = _area(tri[tops & (world.tri_category == 1)])
+    chair_top_area = _area(tri[tops & (world.tri_category == 2)])
+    res2 = 0.05**2
+    assert chair_top_area == pytest.approx(4 * 8 * res2, rel=1e-4)
+    assert table_top_area == pytest.approx((10 * 20 - 4 * 4) * res2, rel=1e-4)
+
+
+def _area(tris: np.ndarray) -> float:
+    return float(0.5 * np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1).sum())
+
+
+@needs_gibson
+def test_every_gibson_floor_builds_compactly_and_no_walkable_camera_is_inside_a_wall():
+    from l3mvn.scenes.semexp import load_split
+    from l3mvn.sim.render import Renderer
+    from l3mvn.sim.types import Pose
+
+    cfg = SimConfig(min_depth_m=1e-3)
+    rng = np.random.default_rng(0)
+    for floors in load_split(GIBSON, "train").values():
+        for scene in floors.values():
+            world = build_world(scene, cfg)
+            assert not (world.walls | world.furniture)[scene.walkable].any(), scene.key
+            assert world.num_triangles < 100_000, (scene.key, world.num_triangles)
+            renderer = Renderer(world, cfg)
+            cells = np.argwhere(scene.walkable)
+            for r, c in cells[rng.choice(len(cells), 8)]:
+                x, y = scene.cell_center(int(r), int(c))
+                for heading in (0.0, 1.6, 3.2, 4.7):
+                    pose = Pose(x, y, heading)
+                    z = renderer.render(pose, 0.0, 3, 32).depth[1]
+                    ray_m = z * np.linalg.norm(renderer.ray_directions(3, 32, pose, 0.0)[1], axis=-1)
+                    # Inside a solid every ray hits a back face within a cell; a walkable cell
+                    # centre is at least half a cell from any wall face.
+                    assert ((z == 0) | (ray_m >= 0.02)).all(), (scene.key, int(r), int(c))
