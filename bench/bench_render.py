@@ -18,7 +18,8 @@ from scipy import ndimage as ndi
 from l3mvn.config import SimConfig
 from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap, disk
 from l3mvn.sim.render import Renderer
-from l3mvn.sim.types import Pose
+from l3mvn.sim.simulator import BuiltinSimulator
+from l3mvn.sim.types import Action, Episode, Pose
 from l3mvn.sim.world import build_world
 
 SIZES = ((120, 160), (480, 640))
@@ -80,7 +81,25 @@ def bench_scene(scene: SceneMap, cfg: SimConfig, frames: int, rng: np.random.Gen
             renderer.render(pose, tilt, h, w)
             times.append((time.perf_counter() - t) * 1e3)
         row[f"{h}x{w}"] = (float(np.median(times)), float(np.percentile(times, 90)))
+        row[f"steps {h}x{w}"] = env_steps_per_second(scene, cfg.with_frame(h, w), frames * 4, rng)
     return row
+
+
+def env_steps_per_second(scene: SceneMap, cfg: SimConfig, steps: int, rng: np.random.Generator) -> float:
+    """Simulator steps per second under uniformly random movement actions (render included)."""
+    env = BuiltinSimulator(scene, cfg)
+    goal = scene.present_goals()[0]
+    cells = np.argwhere(scene.navigable)
+    r, c = cells[rng.integers(len(cells))]
+    x, y = scene.cell_center(int(r), int(c))
+    env.reset(Episode(0, scene.name, scene.floor, Pose(x, y, 0.0), goal))
+    moves = [Action.MOVE_FORWARD, Action.TURN_LEFT, Action.TURN_RIGHT]
+    t = time.perf_counter()
+    for i in range(steps):
+        if env.done:
+            env.reset(Episode(i, scene.name, scene.floor, Pose(x, y, 0.0), goal))
+        env.step(moves[int(rng.integers(len(moves)))])
+    return steps / (time.perf_counter() - t)
 
 
 def main() -> None:
@@ -95,11 +114,13 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     rows = [bench_scene(s, cfg, args.frames, rng) for s in load_scenes(args.dataset, args.split, tuple(args.scenes))]
     sizes = [f"{h}x{w}" for h, w in SIZES]
-    print("| scene | grid | triangles | build s | " + " | ".join(f"{s} median / p90 ms" for s in sizes) + " |")
-    print("|---|---|---:|---:|" + "---:|" * len(sizes))
+    print("| scene | grid | triangles | build s | " + " | ".join(f"{s} median / p90 ms" for s in sizes)
+          + " | " + " | ".join(f"env steps/s {s}" for s in sizes) + " |")
+    print("|---|---|---:|---:|" + "---:|" * (2 * len(sizes)))
     for row in rows:
         cells = " | ".join(f"{row[s][0]:.1f} / {row[s][1]:.1f}" for s in sizes)
-        print(f"| {row['scene']} | {row['grid']} | {row['triangles']} | {row['build_s']:.2f} | {cells} |")
+        steps = " | ".join(f"{row['steps ' + s]:.0f}" for s in sizes)
+        print(f"| {row['scene']} | {row['grid']} | {row['triangles']} | {row['build_s']:.2f} | {cells} | {steps} |")
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@ import math
 import sys
 from pathlib import Path
 
-from l3mvn.config import SimConfig, config_dict, config_hash, override
+from l3mvn.config import SimConfig, override
 from l3mvn.errors import L3MVNError
 
 
@@ -73,6 +73,15 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--out", default=None, help="append one JSON line per finished episode here")
     ev.add_argument("--resume", action="store_true", help="skip episodes already in --out (same policy and config)")
     ev.add_argument("--json", action="store_true", help="print the summary as one JSON object on the last line")
+    ev.add_argument("--workers", type=_positive, default=None,
+                    help="episodes run in parallel (default: 1 locally, one per CPU on Ray)")
+    ev.add_argument("--backend", choices=["local", "ray"], default="local",
+                    help="local worker processes, or Ray actors (pip install 'l3mvn[distributed]')")
+    ev.add_argument("--address", default=None,
+                    help="Ray cluster to join (auto, HOST:PORT, ray://HOST:10001); default: a private local Ray")
+    ev.add_argument("--scorer", default=None, help="language policies: scorer instead of the policy's default")
+    ev.add_argument("--selection", choices=["paper", "official_code"], default="paper",
+                    help="language policies: the paper's bound rule or the official code's thresholds")
     ev.add_argument("--seg-noise", type=float, default=0.0, metavar="P",
                     help="perception errors: per frame and category, miss / mislabel with probability P")
     ev.add_argument("--record", action="store_true", help="write a rerun recording per episode to --record-dir")
@@ -205,50 +214,75 @@ def _cmd_generate(args: argparse.Namespace) -> int:
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
-    from l3mvn.datasets import load_episode_set
-    from l3mvn.eval.metrics import format_summary, summarize
-    from l3mvn.eval.runner import (
-        ResultWriter, RunContext, check_resumable, done_keys, iterate_sequential, read_results,
-    )
-    from l3mvn.policies import make_policy
-    from l3mvn.sim.simulator import BuiltinSimulator
+    from contextlib import closing
 
+    from l3mvn.eval.backends import run_local
+    from l3mvn.eval.job import EvalJob, is_error_row
+    from l3mvn.eval.metrics import format_summary, summarize
+    from l3mvn.eval.runner import ResultWriter, check_resumable, done_keys, read_results
+    from l3mvn.policies import PolicyOptions
+
+    if args.address and args.backend != "ray":
+        raise L3MVNError("--address joins a Ray cluster: add --backend ray")
+    if args.scorer is not None:
+        from l3mvn.language import scorer_names
+
+        if args.scorer not in scorer_names():
+            raise L3MVNError(f"unknown scorer {args.scorer!r}; valid scorers: {', '.join(scorer_names())}")
     cfg = _sim_config(args)
     check_resumable(args.out, args.resume)
-    eset = load_episode_set(args.dataset, args.split, houses=args.houses,
-                            episodes_per_house=args.episodes_per_house, seed=args.seed, cfg=cfg)
+    options = PolicyOptions(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise)
+    job = EvalJob.create(args.dataset, args.split, houses=args.houses, episodes_per_house=args.episodes_per_house,
+                         seed=args.seed, sim=cfg, policy=args.policy, options=options,
+                         record_dir=args.record_dir if args.record else None)
+    eset = job.load()
     episodes = eset.episodes[: args.episodes] if args.episodes else eset.episodes
-    chash = config_hash(cfg, extra={"policy": args.policy, "seed": args.seed})
-    ctx = RunContext(policy=args.policy, config_hash=chash)
+    wanted = {ep.key for ep in episodes}
     previous = read_results(args.out) if args.resume else []
-    skip = done_keys(previous, args.policy, chash)
-    todo = [ep for ep in episodes if ep.key not in skip]
-    results = [r for r in previous if r["key"] in {e.key for e in episodes} and r["key"] in skip]
-    writer = ResultWriter(args.out)
+    skip = done_keys(previous, args.policy, job.config_hash) & wanted
+    todo = [ep.key for ep in episodes if ep.key not in skip]
+    results = {r["key"]: r for r in previous if r["key"] in skip and "error" not in r}
     print(f"{eset.name}/{eset.split}: {len(episodes)} episodes, {len(todo)} to run, policy {args.policy}, "
-          f"rule {cfg.success_rule}, config {chash}", file=sys.stderr)
+          f"rule {cfg.success_rule}, config {job.config_hash}", file=sys.stderr)
+    if args.backend == "ray":
+        from l3mvn.eval.ray_backend import run_ray
+
+        rows = run_ray(job, todo, args.address, args.workers)
+    else:
+        rows = run_local(job, todo, args.workers or 1)
+    errors = 0
+    writer = ResultWriter(args.out)
     try:
-        runs = iterate_sequential(
-            todo, lambda ep: BuiltinSimulator(eset.scene_of(ep), cfg),
-            lambda env: make_policy(args.policy, env, args.seed), ctx,
-        )
-        for i, res in enumerate(runs, 1):
-            row = res.to_json()
-            row["config"] = config_dict(cfg)
-            writer.write(row)
-            results.append(row)
-            sr = sum(r["success"] for r in results) / len(results)
-            print(f"[{i}/{len(todo)}] {res.key} {res.goal}: {res.failure} spl={res.spl:.3f} "
-                  f"(running SR {sr:.3f})", file=sys.stderr)
+        with closing(rows), _progress(len(todo)) as bar:
+            for row in rows:
+                writer.write(row)
+                bar.update(1)
+                if is_error_row(row):
+                    errors += 1
+                    bar.write(f"{row['key']}: error: {row['error']}")
+                    continue
+                results[row["key"]] = row
+                done = list(results.values())
+                bar.set_postfix_str(f"SR {sum(r['success'] for r in done) / len(done):.3f} "
+                                    f"SPL {sum(r['spl'] or 0 for r in done) / len(done):.3f}")
     finally:
         writer.close()
+    if errors:
+        print(f"{errors} episodes failed (error rows in {args.out or 'the log above'}; --resume retries them)",
+              file=sys.stderr)
     if not results:
         raise L3MVNError("no episodes were run")
-    summary = summarize(results)
+    summary = summarize(list(results.values()))
     print(format_summary(summary))
     if args.json:
         print(json.dumps(_json_safe(summary), sort_keys=True))
     return 0
+
+
+def _progress(total: int):
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="ep", file=sys.stderr, dynamic_ncols=True, mininterval=1.0)
 
 
 def _json_safe(obj):

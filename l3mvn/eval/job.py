@@ -23,7 +23,8 @@ from l3mvn.datasets import EpisodeSet, load_episode_set
 from l3mvn.errors import L3MVNError
 from l3mvn.eval.runner import RunContext, run_episode
 from l3mvn.events import EventBus, StepEvent
-from l3mvn.policies import check_policy, make_policy
+from l3mvn.policies import PolicyOptions, check_policy, make_policy
+from l3mvn.recording import Recorder
 from l3mvn.sim.simulator import BuiltinSimulator
 from l3mvn.sim.types import Episode
 
@@ -44,16 +45,22 @@ class EvalJob:
     sim: SimConfig
     policy: str
     config_hash: str
+    options: PolicyOptions = PolicyOptions()
+    record_dir: str | None = None  # write a rerun recording per episode here
 
     @classmethod
     def create(cls, dataset: str | Path | None, split: str, *, houses: int = 5, episodes_per_house: int = 10,
-               seed: int = 0, sim: SimConfig | None = None, policy: str) -> "EvalJob":
-        """A job whose config hash is the one ``l3mvn eval`` writes (SimConfig + policy + seed)."""
+               seed: int = 0, sim: SimConfig | None = None, policy: str, options: PolicyOptions | None = None,
+               record_dir: str | Path | None = None) -> "EvalJob":
+        """A job whose config hash covers SimConfig, policy, policy options and seed (recording
+        changes no result, so it is not hashed)."""
         sim = sim or SimConfig()
-        chash = config_hash(sim, extra={"policy": policy, "seed": seed})
-        # An absolute path, so workers started elsewhere (Ray) find the same files on a shared disk.
+        options = options or PolicyOptions()
+        chash = config_hash(sim, options, extra={"policy": policy, "seed": seed})
+        # Absolute paths, so workers started elsewhere (Ray) find the same files on a shared disk.
         source = None if dataset is None else str(Path(dataset).resolve())
-        return cls(source, split, houses, episodes_per_house, seed, sim, policy, chash)
+        record = None if record_dir is None else str(Path(record_dir).resolve())
+        return cls(source, split, houses, episodes_per_house, seed, sim, policy, chash, options, record)
 
     def load(self) -> EpisodeSet:
         """The job's episode set, loaded once per process."""
@@ -156,18 +163,20 @@ class _JobState:
             self.envs.move_to_end(floor)
         else:
             env = BuiltinSimulator(self.episodes.scene_of(episode), self.job.sim)
-            self.envs[floor] = (env, make_policy(self.job.policy, env, self.job.seed))
+            self.envs[floor] = (env, make_policy(self.job.policy, env, self.job.seed, self.job.options))
             while len(self.envs) > ENV_CACHE_SIZE:
                 self.envs.popitem(last=False)
         env, policy = self.envs[floor]
         setup_s = time.perf_counter() - t0
         timed, stages, bus = _TimedEnv(env), _StageTotals(), EventBus()
         bus.subscribe(stages)
+        if self.job.record_dir is not None:
+            Recorder.for_episode(self.job.record_dir, self.episodes.name, episode, self.job.policy).attach(bus)
         t1 = time.perf_counter()
         result = run_episode(timed, policy, episode, self.ctx, bus=bus)
         run_s = time.perf_counter() - t1
         row = result.to_json()
-        row["config"] = config_dict(self.job.sim)
+        row["config"] = config_dict(self.job.sim, self.job.options)
         row["worker"] = worker_id()
         row["timing"] = {
             "total_s": round(setup_s + run_s, 4),

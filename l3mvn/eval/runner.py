@@ -10,7 +10,7 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Iterator
+from typing import Iterable
 
 from l3mvn.errors import L3MVNError
 from l3mvn.eval.metrics import EpisodeResult
@@ -73,24 +73,9 @@ def read_results(path: str | Path) -> list[dict]:
 
 
 def done_keys(rows: Iterable[dict], policy: str, config_hash: str) -> set[str]:
-    return {r["key"] for r in rows if r.get("policy") == policy and r.get("config_hash") == config_hash}
-
-
-def iterate_sequential(
-    episodes: list[Episode],
-    make_env: Callable[[Episode], BuiltinSimulator],
-    make_policy: Callable[[BuiltinSimulator], object],
-    ctx: RunContext,
-) -> Iterator[EpisodeResult]:
-    """Run episodes in this process, reusing one environment and policy per scene floor."""
-    cache: dict[str, tuple[BuiltinSimulator, object]] = {}
-    for ep in episodes:
-        key = f"{ep.scene}/{ep.floor}"
-        if key not in cache:
-            env = make_env(ep)
-            cache = {key: (env, make_policy(env))}
-        env, policy = cache[key]
-        yield run_episode(env, policy, ep, ctx)
+    """Keys finished under this policy and config; error rows do not count (resume retries them)."""
+    return {r["key"] for r in rows
+            if r.get("policy") == policy and r.get("config_hash") == config_hash and "error" not in r}
 
 
 def check_resumable(path: str | Path | None, resume: bool) -> None:

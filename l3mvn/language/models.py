@@ -42,6 +42,9 @@ def resolve(name: str) -> str:
 
 
 def _load(loader, name: str, what: str):
+    from transformers.utils import logging as hf_logging
+
+    hf_logging.disable_progress_bar()  # weight-loading bars would flood eval logs and the CLI
     source = resolve(name)
     try:
         return loader(source)

@@ -1,0 +1,60 @@
+"""The paper's fusion of S_LLM with S_CU, with the shipped feed-forward scorer (offline MiniLM)."""
+
+import numpy as np
+import pytest
+
+from l3mvn.errors import L3MVNError
+from l3mvn.frontiers import Frontier
+from l3mvn.policies import POLICY_NAMES, PolicyOptions
+from l3mvn.policies.language_policy import LanguageFrontierPolicy
+
+
+def _frontier(i: int, objects: tuple[str, ...], s_cu: float, utility: float = 10.0) -> Frontier:
+    return Frontier(id=i, cells=np.array([[i, i]]), center=(i, i), size=10, distance_m=1.0 + i,
+                    utility=utility, cost=1.0 + i, s_cu=s_cu, objects=objects)
+
+
+@pytest.fixture(scope="module")
+def policy():
+    return LanguageFrontierPolicy("l3mvn-ff", "feedforward")
+
+
+def test_confident_language_wins_over_exploration(policy):
+    frontiers = [_frontier(0, ("chair",), 1.0), _frontier(1, ("sink", "bathtub", "shower"), 0.0)]
+    sel = policy.select(frontiers, None, "toilet", np.random.default_rng(0))
+    assert sel.frontier == 1 and frontiers[1].s_llm > 0.30
+    assert "language" in sel.reason
+    assert frontiers[1].queries == {"all goals": "This frontier contains shower, bathtub, and sink."}
+    assert sum(frontiers[1].llm_scores.values()) == pytest.approx(1.0, abs=1e-3)
+
+
+def test_language_below_the_bound_defers_to_cost_utility(policy):
+    frontiers = [_frontier(0, ("sink", "bathtub", "shower"), 0.2), _frontier(1, ("toilet", "sink"), 0.9)]
+    sel = policy.select(frontiers, None, "tv", np.random.default_rng(0))
+    assert max(f.s_llm for f in frontiers) < 0.15
+    assert sel.frontier == 1 and "exploration" in sel.reason
+
+
+def test_in_between_fuses_with_cost_utility_rescaled_into_the_bound(policy):
+    # No informative object: uniform 1/6 = 0.167, inside B = [0.15, 0.30].
+    frontiers = [_frontier(0, (), 0.1), _frontier(1, ("chair",), 0.8), _frontier(2, (), 0.5)]
+    sel = policy.select(frontiers, None, "bed", np.random.default_rng(0))
+    assert sel.frontier == 1 and "fused" in sel.reason
+    assert frontiers[1].fused == pytest.approx(0.15 + 0.8 * 0.15)
+    assert frontiers[0].fused == pytest.approx(1 / 6, abs=1e-6)
+
+
+def test_official_code_feedforward_falls_back_to_best_utility_below_0_2():
+    policy = LanguageFrontierPolicy("l3mvn-ff", "feedforward", selection="official_code")
+    frontiers = [_frontier(0, (), 0.3, utility=5.0), _frontier(1, (), 0.9, utility=20.0)]
+    sel = policy.select(frontiers, None, "bed", np.random.default_rng(0))
+    assert sel.frontier == 1 and "utility" in sel.reason
+
+
+def test_table_ii_ablations_are_named_policies():
+    assert {"near+llm", "exp", "exp+llm", "l3mvn-zs", "l3mvn-ff"} <= set(POLICY_NAMES)
+
+
+def test_unknown_selection_is_a_clear_error():
+    with pytest.raises(L3MVNError, match="unknown selection 'best'.*paper, official_code"):
+        PolicyOptions(selection="best")
