@@ -33,6 +33,7 @@ from l3mvn.viz import colorize_depth, colorize_semantic
 log = logging.getLogger(__name__)
 
 MIN_SPEED, MAX_SPEED = 0.5, 60.0
+DEFAULT_SCORER = "policy default"  # the scorer choice that keeps the policy's own
 MAX_QUEUED_STEPS = 5
 FRAME_WIDTH = 320  # camera frames are shown at most this wide
 
@@ -153,9 +154,13 @@ class DashboardController:
         self._notify(f"policy {name!r} takes effect on the next Reset", client_id=client_id)
 
     def set_scorer(self, name: str, *, client_id: int | None = None) -> None:
-        names = self.scorer_names()
+        names = (DEFAULT_SCORER,) + self.scorer_names()
         if name not in names:
-            raise L3MVNError(f"unknown scorer {name!r}; valid scorers: {', '.join(names) or 'none available'}")
+            raise L3MVNError(f"unknown scorer {name!r}; valid scorers: {', '.join(names)}")
+        if name == DEFAULT_SCORER:
+            self.scorer = None
+            self._notify("the policy's own scorer returns on the next Reset", client_id=client_id)
+            return
         self.scorer = name
         self._submit("scorer", self._apply_scorer, client_id)
 

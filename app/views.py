@@ -19,7 +19,7 @@ import numpy as np
 import viser
 
 from app.map_image import score_color
-from app.session_worker import MAX_SPEED, MIN_SPEED, DashboardController
+from app.session_worker import DEFAULT_SCORER, MAX_SPEED, MIN_SPEED, DashboardController
 from app.state import Cell, MapView, Notice, Snapshot
 from l3mvn.errors import L3MVNError
 from l3mvn.policies import POLICY_NAMES
@@ -82,9 +82,8 @@ class DashboardView:
                                            hint="changing it mid-episode starts a new segment")
             self.policy = gui.add_dropdown("Policy", POLICY_NAMES, initial_value=ctl.policy_name,
                                            hint="takes effect on the next Reset")
-            scorers = ctl.scorer_names()
-            self.scorer = gui.add_dropdown("Scorer", scorers or ("none",), disabled=not scorers,
-                                           hint=None if scorers else "l3mvn.language offers no scorers")
+            self.scorer = gui.add_dropdown("Scorer", (DEFAULT_SCORER,) + ctl.scorer_names(),
+                                           hint="language policies only; 'policy default' restores theirs on Reset")
             self.controls = gui.add_button_group("Controls", BUTTONS)
             self.speed = gui.add_slider("Steps / s", min=MIN_SPEED, max=MAX_SPEED, step=0.5,
                                         initial_value=ctl.snapshot.steps_per_second)

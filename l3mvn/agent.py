@@ -49,6 +49,13 @@ class AgentConfig:
     # Escape: after this many steps with the goal unreachable (usually walled in by its own
     # collision marks) or a stuck signal, clear the marks and wiggle out with random turns.
     escape_after_unreachable: int = 3
+    # Exploration goals (frontiers, sampled cells, manual cells) are approached with this small goal
+    # disk, not the object's 0.5 m one: that one reaches through walls, so a frontier in the next
+    # room read as "reached" from this side and the agent pushed into the wall.
+    explore_goal_dilation_m: float = 0.1
+    # A reached or unreachable exploration goal blocks frontiers whose centre lies this close to it.
+    blocked_radius_m: float = 1.0
+    max_reselect: int = 3  # exploration goals tried within one step before walking on
     seg_noise: float = 0.0
 
     def __post_init__(self) -> None:
@@ -155,30 +162,30 @@ class MapAgent:
         t["select"] = time.perf_counter()
 
         plan = self._plan(sem_map, goal, kind, last_move)
-        if plan.reached and kind in _EXPLORING:
-            # Reached an exploration goal: never come back to it, and pick the next one now rather
-            # than spending this step walking into whatever stands behind it.
+        retries = 0
+        while kind in _EXPLORING and (plan.reached or not plan.reachable) and retries < self.cfg.max_reselect:
+            # Reached (or found unreachable) an exploration goal: never come back to it, and pick
+            # the next one now rather than spending this step on a goal that is done.
             self._blocked.append(self._ltg)
             more_f, more_p = self._reselect(sem_map)
             frontiers_ms, policy_ms = frontiers_ms + more_f, policy_ms + more_p
             goal, kind, reason = self._ltg, self._ltg_kind, self._ltg_reason
             plan = self._plan(sem_map, goal, kind, None)
+            retries += 1
         t["planning"] = time.perf_counter()
         self.stuck = plan.stuck
         action = plan.action
         self._unreachable = 0 if plan.reachable else self._unreachable + 1
         if plan.reached and kind == "target":
             action, reason = Action.STOP, f"{self.goal} within {plan.distance_to_goal_m:.2f} m: stop"
-        elif plan.reached and kind == "manual":
-            self._manual = None
-            self._since_select = math.inf
-        elif plan.reached:
-            self._since_select = math.inf
         elif self._unreachable >= self.cfg.escape_after_unreachable or plan.stuck:
             if kind in _EXPLORING:
                 self._blocked.append(self._ltg)
             self._start_escape()
             action, reason = self._escape.pop(), "goal unreachable or stuck: clearing collision marks, escaping"
+        elif plan.reached and kind == "manual":
+            self._manual = None
+            self._since_select = math.inf
         self._since_select += 1
         self._steps += 1
         return self._decide(obs, action, sem_map, goal if isinstance(goal, tuple) else _centre(goal), kind,
@@ -195,9 +202,13 @@ class MapAgent:
         return (t1 - t0) * 1e3, (time.perf_counter() - t1) * 1e3
 
     def _plan(self, sem_map: SemanticMap, goal, kind: str, last_move: float | None):
-        radius = self.cfg.stop_distance_m if kind == "target" else self.cfg.frontier_reached_m
+        if kind == "target":
+            radius, dilation = self.cfg.stop_distance_m, None
+        else:
+            radius, dilation = self.cfg.frontier_reached_m, self.cfg.explore_goal_dilation_m
         return self.planner.plan(sem_map.obstacle, sem_map.agent_cell, sem_map.agent_heading, goal,
-                                 last_move_m=last_move, goal_reached_radius_m=radius)
+                                 last_move_m=last_move, goal_reached_radius_m=radius,
+                                 goal_dilation_m=dilation)
 
     def _start_escape(self) -> None:
         self.planner.clear_collisions()
@@ -248,14 +259,10 @@ class MapAgent:
         corners = np.array([[max(rows[0] - 1, 0), max(cols[0] - 1, 0)],
                             [min(rows[-1] + 1, last), min(cols[-1] + 1, last)]])
         field_ = self.planner.distance_from_agent(sem_map.obstacle, sem_map.agent_cell, targets=corners).full()
-        frontiers = extract_frontiers(sem_map.explored, sem_map.obstacle, sem_map.agent_cell, field_,
-                                      sem_map.categories, sem_map.category_names, self.cfg.frontier)
-        if self._blocked:
-            blocked = np.array(self._blocked)
-            keep = [f for f in frontiers
-                    if np.min(np.hypot(*(blocked - np.array(f.center)).T)) * sem_map.resolution_m > 1.0]
-            frontiers = keep or frontiers
-        return frontiers
+        return extract_frontiers(sem_map.explored, sem_map.obstacle, sem_map.agent_cell, field_,
+                                 sem_map.categories, sem_map.category_names, self.cfg.frontier,
+                                 blocked=np.array(self._blocked, dtype=np.int64).reshape(-1, 2),
+                                 blocked_radius_cells=self.cfg.blocked_radius_m / sem_map.resolution_m)
 
     def _select(self, sem_map: SemanticMap) -> None:
         self._since_select = 0

@@ -47,14 +47,26 @@ def extract_frontiers(
     category_maps: np.ndarray,
     category_names: tuple[str, ...],
     cfg: FrontierConfig = FrontierConfig(),
+    blocked: np.ndarray | None = None,
+    blocked_radius_cells: float = 0.0,
 ) -> list[Frontier]:
     """Frontiers of an (H, W) map, best S_CU first, ids 0..n-1 in that order.
 
     explored, obstacle: bool (H, W); agent_cell: (row, col); distance_m: float (H, W) geodesic
     distance from the agent, inf where unreachable; category_maps: bool (K, H, W) named by
-    ``category_names``.
+    ``category_names``. blocked: (N, 2) cells the caller is done with (reached or unreachable
+    goals); a cluster whose candidate lies within ``blocked_radius_cells`` of one is dropped
+    before the far limit, so frontiers beyond it stay eligible once the near ones are used up.
     """
     _validate(explored, obstacle, agent_cell, distance_m, category_maps, category_names, cfg)
+    if blocked_radius_cells < 0:
+        raise L3MVNError(f"blocked_radius_cells must be >= 0, got {blocked_radius_cells}")
+    if blocked is not None:
+        blocked = np.asarray(blocked)
+        if blocked.size == 0:
+            blocked = None
+        elif blocked.ndim != 2 or blocked.shape[1] != 2:
+            raise L3MVNError(f"blocked must be an (N, 2) array of (row, col) cells, got shape {blocked.shape}")
     box = _crop_box(explored, margin=max(1, cfg.obstacle_dilation_cells))
     if box is None:
         return []
@@ -75,6 +87,9 @@ def extract_frontiers(
     sizes = np.diff(bounds).astype(np.float64)
     centers = _centers(cells, bounds)
     distances = _cluster_distances(cells, bounds, centers, distance_m)
+    if blocked is not None:
+        gap = np.hypot(centers[:, None, 0] - blocked[None, :, 0], centers[:, None, 1] - blocked[None, :, 1])
+        distances = np.where(gap.min(axis=1) <= blocked_radius_cells, np.inf, distances)
     keep = _distance_filter(distances, cfg)
     if keep.size == 0:
         return []

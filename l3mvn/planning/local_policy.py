@@ -135,7 +135,7 @@ class LocalPlanner:
     def __init__(self, cfg: PlannerConfig | None = None) -> None:
         self.cfg = cfg or PlannerConfig()
         self._obstacle_kernel = _disk(self.cfg.obstacle_dilation_cells)
-        self._goal_kernel = _disk(self.cfg.goal_dilation_cells)
+        self._goal_kernels = {self.cfg.goal_dilation_cells: _disk(self.cfg.goal_dilation_cells)}
         escape = self.cfg.obstacle_dilation_cells + 1
         self._escape_offsets = np.argwhere(_disk(escape) > 0) - escape
         self._ray_rows, self._ray_cols = _rays(self.cfg.lookahead_cells)
@@ -174,6 +174,7 @@ class LocalPlanner:
         *,
         last_move_m: float | None = None,
         goal_reached_radius_m: float = 0.5,
+        goal_dilation_m: float | None = None,
     ) -> Plan:
         """Choose the next action toward ``goal``.
 
@@ -182,6 +183,9 @@ class LocalPlanner:
         last_move_m: distance actually moved by the previous action if it was MOVE_FORWARD, else
         None; below ``collision_threshold_m`` it counts as a collision. reached: the goal
         distance estimate is within ``goal_reached_radius_m`` and the goal is reachable.
+        goal_dilation_m: overrides the config's for this call. The 0.5 m disk suits an object
+        (approached from any free side), but it reaches through walls: an exploration goal needs
+        a small one, or a frontier behind a wall reads as reached from the wrong room.
         """
         cfg = self.cfg
         obstacle = self._check_map(obstacle)
@@ -191,9 +195,10 @@ class LocalPlanner:
         if goal_reached_radius_m < 0:
             raise L3MVNError(f"goal_reached_radius_m must be >= 0, got {goal_reached_radius_m}")
         goal_rows, goal_cols = _goal_cells(goal, obstacle.shape)
+        dilation = self._dilation_cells(goal_dilation_m)
         collided = self._record_motion(agent, heading, last_move_m)
 
-        key = (goal_rows.tobytes(), goal_cols.tobytes())
+        key = (goal_rows.tobytes(), goal_cols.tobytes(), dilation)
         nearest_goal = _nearest(agent, goal_rows, goal_cols)
         reused = self._reusable(obstacle, agent, key, nearest_goal)
         replanned = reused is None
@@ -202,7 +207,7 @@ class LocalPlanner:
         else:
             escape = not self._base_free(obstacle, agent)
             field, trav, sources = self._goal_field(
-                obstacle, agent, goal_rows, goal_cols, nearest_goal, escape
+                obstacle, agent, goal_rows, goal_cols, nearest_goal, escape, dilation
             )
             if not escape:
                 self._cache = _GoalField(key, trav, sources, field)
@@ -213,7 +218,7 @@ class LocalPlanner:
             distance = math.inf
             field, trav = self._fallback_field(obstacle, agent, goal_rows, goal_cols)
         elif d_agent > 0:
-            distance = d_agent + cfg.goal_dilation_m
+            distance = d_agent + dilation * cfg.resolution_m
         else:
             distance = math.dist(nearest_goal, agent) * cfg.resolution_m
         if stg is None:
@@ -268,6 +273,15 @@ class LocalPlanner:
         self.fmm_runs += 1
         limit = math.inf if max_distance_m is None else float(max_distance_m)
         return GeodesicField(values, window, obstacle.shape, limit)
+
+    def _dilation_cells(self, goal_dilation_m: float | None) -> int:
+        if goal_dilation_m is None:
+            return self.cfg.goal_dilation_cells
+        if not (math.isfinite(goal_dilation_m) and 0 <= goal_dilation_m <= self.cfg.goal_dilation_m):
+            raise L3MVNError(
+                f"goal_dilation_m must lie in [0, {self.cfg.goal_dilation_m}] (the config's), got {goal_dilation_m}"
+            )
+        return int(round(goal_dilation_m / self.cfg.resolution_m))
 
     # -- map preparation ------------------------------------------------------------------------
 
@@ -333,6 +347,7 @@ class LocalPlanner:
         goal_cols: np.ndarray,
         nearest_goal: tuple[int, int],
         escape: bool,
+        dilation: int,
     ) -> tuple[GeodesicField, np.ndarray, np.ndarray]:
         """FMM to the dilated goal on the smallest window whose answer around the agent is exact.
 
@@ -349,7 +364,8 @@ class LocalPlanner:
         lookahead = cfg.lookahead_cells * res
         straight = math.dist(agent, nearest_goal) * res
         margin = max(cfg.window_margin_m, _margin_for(straight + lookahead + _slack(straight), straight))
-        pad = cfg.goal_dilation_cells + 1
+        pad = dilation + 1
+        kernel = self._goal_kernels.setdefault(dilation, _disk(dilation))
         whole = self._whole_window(obstacle, rows, cols)
         while True:
             window = whole
@@ -361,7 +377,7 @@ class LocalPlanner:
                 trav = self._with_escape(trav, obstacle, window, agent)
             goal_mask = np.zeros(window.shape, dtype=np.uint8)
             goal_mask[goal_rows - window.r0, goal_cols - window.c0] = 1
-            sources = (cv2.dilate(goal_mask, self._goal_kernel) > 0) & trav
+            sources = (cv2.dilate(goal_mask, kernel) > 0) & trav
             exact = window == whole or self._exact(window, obstacle)
             bound = math.inf if exact else self._exit_bound_m(agent, window, sources, obstacle.shape)
             values = distance_field(trav, sources, resolution_m=res, limit_m=None if exact else bound)
