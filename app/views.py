@@ -100,12 +100,20 @@ class DashboardView:
             self.frontier_pick = gui.add_dropdown("Frontier", ("none",), disabled=True)
             self.goal_buttons = gui.add_button_group("Manual goal", ("Go to frontier", "Clear"))
             self.frontier_table = gui.add_markdown("_no frontiers: the policy keeps no map_")
+        with gui.add_folder("Recordings"):
+            self.recordings = gui.add_markdown(_recordings_markdown(ctl.record_dir))
+            self.refresh_recordings = gui.add_button("Refresh list")
         with gui.add_folder("Legend"):
             self.legend = gui.add_html("")
+        self._listed_episodes = 0
         self._wire_gui()
 
     def _wire_gui(self) -> None:
         ctl = self.ctl
+
+        @self.refresh_recordings.on_click
+        def _(event: viser.GuiEvent) -> None:
+            self.recordings.content = _recordings_markdown(ctl.record_dir)
 
         @self.scene.on_update
         def _(event: viser.GuiEvent) -> None:
@@ -268,6 +276,9 @@ class DashboardView:
             m = snap.metrics
             self.metrics.content = (f"**This server session**: {m.episodes} episodes done, "
                                     f"SR {m.sr:.2f}, SPL {m.spl:.2f}")
+            if m.episodes != self._listed_episodes:  # a finished episode may have written a recording
+                self._listed_episodes = m.episodes
+                self.recordings.content = _recordings_markdown(self.ctl.record_dir)
             if snap.event is self._drawn_event:
                 return
             self._drawn_event = snap.event
@@ -435,6 +446,19 @@ def _frontier_markdown(view: MapView) -> str:
                     f"{', '.join(f.objects) or '-'} |")
     queries = [f"- F{f.id} `{q}`" for f in view.frontiers for q in list(f.queries.values())[:1]]
     return "\n".join(rows) + ("\n\n**Queries**\n" + "\n".join(queries) if queries else "")
+
+
+def _recordings_markdown(record_dir, limit: int = 8) -> str:
+    """The newest recordings and how to open them (replay runs rerun's viewer, outside the page)."""
+    from l3mvn.recording import list_recordings
+
+    found = list_recordings(record_dir)
+    if not found:
+        return f"_no recordings in `{record_dir}/` yet: tick Record (.rrd), then Reset_"
+    lines = [f"{len(found)} in `{record_dir}/`, newest first; open one with `l3mvn replay FILE --web`:", ""]
+    for info in found[:limit]:
+        lines.append(f"- `{info.path.name}` ({info.size_bytes / 1e6:.1f} MB)")
+    return "\n".join(lines)
 
 
 def _legend_html(view: MapView) -> str:

@@ -44,6 +44,9 @@ class AgentConfig:
     look_around_steps: int = 12  # an initial 360-degree turn (12 x 30 deg): ~+0.08 SPL in the prototype
     target_min_cells: int = 4  # cells of the goal channel before the target counts as seen
     stop_distance_m: float = 0.9  # stop when the mapped target is this close (success needs < 1.0 m)
+    # Goal cells too few to stop at are approached to this distance; still too few then: rejected.
+    candidate_reached_m: float = 0.9
+    target_escapes: int = 2  # escapes tried for an unreachable target before it is set aside
     frontier_reached_m: float = 0.75  # >= the 0.5 m minimum frontier distance (no dead zone)
     commitment_margin: float = 0.15  # keep the current frontier unless another scores this much higher
     # Escape: after this many steps with the goal unreachable (usually walled in by its own
@@ -106,6 +109,8 @@ class MapAgent:
         self._frontiers: list[Frontier] = []
         self._unreachable = 0
         self._escape: list[Action] = []
+        self._rejected: np.ndarray | None = None
+        self._target_escapes = 0
         self.stuck = False
 
     def change_target(self, goal: str) -> None:
@@ -143,14 +148,17 @@ class MapAgent:
             self._steps += 1
             return self._decide(obs, self._escape.pop(), sem_map, self._ltg, "escape",
                                 "escaping: cleared collision marks, random turn then forward", t, None, None)
-        target = self._target_mask(sem_map)
+        target, confirmed = self._target_mask(sem_map)
         override = None
         frontiers_ms = policy_ms = 0.0
         if self._manual is not None:
             goal, kind, reason = self._manual, "manual", f"manual goal {self._manual} set in the dashboard"
             override = f"manual:{self._manual[0]},{self._manual[1]}"
-        elif target is not None:
+        elif target is not None and confirmed:
             goal, kind, reason = target, "target", f"{self.goal} seen: heading to it"
+        elif target is not None:
+            goal, kind = target, "candidate"
+            reason = f"{int(target.sum())} {self.goal} cell(s) seen: too few to stop, going closer to confirm"
         elif self._steps < self.cfg.look_around_steps:
             self._steps += 1
             return self._decide(obs, Action.TURN_LEFT, sem_map, None, "look-around",
@@ -178,11 +186,26 @@ class MapAgent:
         self._unreachable = 0 if plan.reachable else self._unreachable + 1
         if plan.reached and kind == "target":
             action, reason = Action.STOP, f"{self.goal} within {plan.distance_to_goal_m:.2f} m: stop"
+        elif kind == "target" and not plan.reachable and _straight_m(sem_map, goal) <= self.cfg.stop_distance_m:
+            # Seen over a counter or through a gap the map closes: as near as the free space allows.
+            action, reason = Action.STOP, f"{self.goal} {_straight_m(sem_map, goal):.2f} m away (no path closer): stop"
+        elif kind in ("candidate", "target") and self._unreachable >= self.cfg.escape_after_unreachable and (
+            kind == "candidate" or self._target_escapes >= self.cfg.target_escapes
+        ):
+            self._rejected |= goal
+            self._unreachable, self._target_escapes, self._since_select = 0, 0, math.inf
+            reason = f"{self.goal} cells unreachable: set aside, exploring on"
         elif self._unreachable >= self.cfg.escape_after_unreachable or plan.stuck:
+            if kind == "target" and not plan.reachable:
+                self._target_escapes += 1
             if kind in _EXPLORING:
                 self._blocked.append(self._ltg)
             self._start_escape()
             action, reason = self._escape.pop(), "goal unreachable or stuck: clearing collision marks, escaping"
+        elif plan.reached and kind == "candidate":
+            # Close enough to see it well, and it never grew into a target: mapping noise.
+            self._rejected |= target
+            self._since_select = math.inf
         elif plan.reached and kind == "manual":
             self._manual = None
             self._since_select = math.inf
@@ -197,6 +220,11 @@ class MapAgent:
         """Extract frontiers and let the global policy choose; returns (frontier ms, policy ms)."""
         t0 = time.perf_counter()
         self._frontiers = self._extract(sem_map)
+        if not self._frontiers and self._blocked:
+            # Every frontier left was reached once and is still there (the camera could not clear
+            # it from where the agent stood): visiting them again beats wandering at random.
+            self._blocked.clear()
+            self._frontiers = self._extract(sem_map)
         t1 = time.perf_counter()
         self._select(sem_map)
         return (t1 - t0) * 1e3, (time.perf_counter() - t1) * 1e3
@@ -204,6 +232,8 @@ class MapAgent:
     def _plan(self, sem_map: SemanticMap, goal, kind: str, last_move: float | None):
         if kind == "target":
             radius, dilation = self.cfg.stop_distance_m, None
+        elif kind == "candidate":
+            radius, dilation = self.cfg.candidate_reached_m, None
         else:
             radius, dilation = self.cfg.frontier_reached_m, self.cfg.explore_goal_dilation_m
         return self.planner.plan(sem_map.obstacle, sem_map.agent_cell, sem_map.agent_heading, goal,
@@ -230,25 +260,27 @@ class MapAgent:
             self._frame_shape = depth.shape
         return self._mapper.update(depth, semantic, obs.pose, obs.tilt)
 
-    def _target_mask(self, sem_map: SemanticMap) -> np.ndarray | None:
-        """The largest connected blob of the goal channel, once it has enough cells."""
+    def _target_mask(self, sem_map: SemanticMap) -> tuple[np.ndarray | None, bool]:
+        """The largest connected blob of the goal channel (rejected cells aside) and whether it has
+        enough cells to stop at; a smaller one is worth a closer look (a far plant maps to 1-2 cells)."""
         if self.goal not in sem_map.category_names:
-            return None
+            return None, False
         channel = sem_map.category(self.goal)
+        if self._rejected is None or self._rejected.shape != channel.shape:
+            self._rejected = np.zeros_like(channel)
+        channel = channel & ~self._rejected
         rows, cols = np.nonzero(channel.any(axis=1))[0], np.nonzero(channel.any(axis=0))[0]
         if len(rows) == 0:
-            return None
+            return None, False
         r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
         crop = channel[r0:r1, c0:c1].astype(np.uint8)
         n, labels, stats, _ = cv2.connectedComponentsWithStats(crop, connectivity=8)
         if n <= 1:
-            return None
+            return None, False
         best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-        if stats[best, cv2.CC_STAT_AREA] < self.cfg.target_min_cells:
-            return None
         mask = np.zeros_like(channel)
         mask[r0:r1, c0:c1] = labels == best
-        return mask
+        return mask, bool(stats[best, cv2.CC_STAT_AREA] >= self.cfg.target_min_cells)
 
     def _extract(self, sem_map: SemanticMap) -> list[Frontier]:
         # The field must cover every explored cell: frontiers far from any obstacle (the open end of
@@ -310,6 +342,13 @@ class MapAgent:
             short_term_goal=stg, override=override, target_seen=kind == "target", stuck=self.stuck,
             timings_ms=timings,
         )
+
+
+def _straight_m(sem_map: SemanticMap, mask: np.ndarray) -> float:
+    """Straight-line distance from the agent to the nearest cell of ``mask`` (the success rule's)."""
+    rows, cols = np.nonzero(mask)
+    r, c = sem_map.agent_cell
+    return float(np.sqrt(((rows - r) ** 2 + (cols - c) ** 2).min())) * sem_map.resolution_m
 
 
 def _centre(mask: np.ndarray) -> tuple[int, int]:

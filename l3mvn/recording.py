@@ -556,6 +556,8 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", type=int, default=DEFAULT_WEB_PORT,
                         help=f"HTTP port of the web viewer with --web (default {DEFAULT_WEB_PORT}); its data "
                              "port is picked free and printed too")
+    parser.add_argument("--host", default="127.0.0.1",
+                        help="interface the web viewer binds with --web (default 127.0.0.1, this machine only)")
 
 
 def run_replay(args: argparse.Namespace) -> int:
@@ -569,7 +571,10 @@ def run_replay(args: argparse.Namespace) -> int:
         if not _port_free(args.port):
             raise L3MVNError(f"port {args.port} is in use; pick another with --port")
         grpc = _free_port()
-        cmd = [exe, "--web-viewer", "--web-viewer-port", str(args.port), "--port", str(grpc), str(path)]
+        cmd = [exe, "--web-viewer", "--web-viewer-port", str(args.port), "--port", str(grpc),
+               "--bind", args.host, str(path)]
+        if args.host not in ("127.0.0.1", "localhost", "::1"):
+            print(f"warning: serving on {args.host}: anyone who can reach it can read the recording", file=sys.stderr)
         print(f"serving {path} at {web_viewer_url(args.port, grpc)} (HTTP port {args.port}, data port {grpc}; "
               "Ctrl-C to stop)", flush=True)
     else:

@@ -183,6 +183,26 @@ def test_a_finished_episode_counts_in_the_session_metrics(ctl):
         ctl.run()
 
 
+def test_a_recorded_episode_is_written_and_listed_on_the_page(dash, ctl, tmp_path):
+    ctl.record_dir = tmp_path
+    ctl.set_record(True)
+    scene = ctl.scene_keys[0]
+    nearest = min(range(3), key=lambda i: ctl.episodes_of(scene)[i].geodesic_distance_m)
+    _reset(ctl, nearest)
+    ctl.set_speed(60)
+    ctl.run()
+    deadline = time.monotonic() + 20
+    while not ctl.snapshot.event.done and time.monotonic() < deadline:
+        time.sleep(0.05)
+    ctl.set_record(False)
+    files = list(tmp_path.glob("*.rrd"))
+    assert len(files) == 1 and files[0].name.endswith("_oracle.rrd")
+    deadline = time.monotonic() + 5
+    while files[0].name not in dash.view.recordings.content and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert files[0].name in dash.view.recordings.content
+
+
 def test_an_exception_in_the_worker_is_shown_and_the_worker_keeps_serving(ctl):
     _reset(ctl)
     policy = ctl.session.policy

@@ -148,6 +148,20 @@ def test_far_frontiers_are_kept_when_none_lies_within_max_distance():
     assert sorted(f.center[1] for f in frontiers) == [10, 90]
 
 
+def test_blocked_frontiers_are_dropped_before_the_far_limit_so_far_ones_return():
+    # The near door was reached and blocked: the far one must come back even though it lies
+    # beyond max_distance_m (the limit only applies while an eligible frontier lies within it).
+    explored, obstacle, agent = two_door_room()
+    (near,) = extract(explored, obstacle, agent, FrontierConfig(max_distance_m=2.0))
+    maps = np.zeros((0, *explored.shape), dtype=bool)
+    distance = straight_line(explored.shape, agent)
+    frontiers = extract_frontiers(explored, obstacle, agent, distance, maps, (), FrontierConfig(max_distance_m=2.0),
+                                  blocked=np.array([near.center]), blocked_radius_cells=20)
+    assert [f.center[1] for f in frontiers] == [90]
+    with pytest.raises(L3MVNError, match="blocked"):
+        extract_frontiers(explored, obstacle, agent, distance, maps, (), blocked=np.array([1, 2, 3]))
+
+
 @pytest.mark.parametrize("unreachable", [np.inf, np.nan])
 def test_frontier_cells_marked_unreachable_take_the_distance_of_a_reachable_neighbour(unreachable):
     explored, obstacle, agent = corridor_open_at_right()

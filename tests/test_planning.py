@@ -263,6 +263,20 @@ def test_reached_is_true_only_within_the_radius():
     assert planner.plan(_room(), (60, 60), 0.0, (60, 76), goal_reached_radius_m=1.0).reached
 
 
+def test_small_goal_dilation_keeps_a_goal_behind_a_thin_wall_from_reading_as_reached():
+    obstacle = _room()
+    obstacle[:100, 64] = True  # a one-cell wall, its door at the far end
+    planner = LocalPlanner(PlannerConfig(obstacle_dilation_cells=1))
+    through_wall = planner.plan(obstacle, (40, 58), 0.0, (40, 70), goal_reached_radius_m=0.75)
+    assert through_wall.reached  # the 0.5 m object disk reaches across the wall
+    planner.reset()
+    frontier = planner.plan(obstacle, (40, 58), 0.0, (40, 70), goal_reached_radius_m=0.75, goal_dilation_m=0.1)
+    assert frontier.reachable and not frontier.reached
+    assert frontier.distance_to_goal_m > 3.0  # via the door
+    with pytest.raises(L3MVNError, match="goal_dilation_m"):
+        planner.plan(obstacle, (40, 58), 0.0, (40, 70), goal_dilation_m=0.8)
+
+
 def test_bad_inputs_raise_clear_errors():
     planner = LocalPlanner()
     with pytest.raises(L3MVNError, match="bool"):

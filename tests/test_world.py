@@ -63,6 +63,18 @@ def test_real_wall_behind_an_object_is_kept():
     assert walls[0:4, BED[1]].all()
 
 
+def test_an_object_deep_in_the_eroded_margin_gets_a_view_corridor_to_the_floor():
+    # A plant in a niche: its navmesh stays 8 cells away (4 more than the usual margin).
+    scene = two_rooms(("bed", "toilet", "potted plant"), {"potted plant": (slice(8, 12), slice(40, 44))})
+    nav = scene.navigable & ~ndi.binary_dilation(scene.category_mask("potted plant"), disk(8))
+    scene = SceneMap(name="Niche", floor=0, categories=scene.categories, navigable=nav, objects=scene.objects)
+    walls, _ = wall_grids(scene)
+    plant = scene.category_mask("potted plant")
+    corridor = ndi.binary_dilation(plant, np.ones((3, 3), bool)) & ~plant & ~walls
+    assert corridor.any(), "the plant is walled in"
+    assert walls[0:4, 40:44].all(), "the outer wall behind the plant must stay"
+
+
 def test_one_cell_speck_is_removed_but_one_cell_wall_between_rooms_is_kept():
     scene = two_rooms()
     assert not scene.free[SPECK] and not scene.object_any[SPECK], "the map must contain the speck"
@@ -142,3 +154,23 @@ def test_every_gibson_floor_builds_compactly_and_no_walkable_camera_is_inside_a_
                     # Inside a solid every ray hits a back face within a cell; a walkable cell
                     # centre is at least half a cell from any wall face.
                     assert ((z == 0) | (ray_m >= 0.02)).all(), (scene.key, int(r), int(c))
+
+
+@needs_gibson
+def test_no_goal_object_of_the_gibson_houses_is_walled_in():
+    from l3mvn.scenes.semexp import load_split
+
+    walled = []
+    for name, floors in load_split(GIBSON, "train").items():
+        for scene in floors.values():
+            walls, furniture = wall_grids(scene)
+            open_cells = ~walls & ~furniture
+            for goal in scene.present_goals():
+                labels, n = ndi.label(scene.category_mask(goal), structure=np.ones((3, 3)))
+                for k in range(1, n + 1):
+                    comp = labels == k
+                    ring = ndi.binary_dilation(comp, np.ones((3, 3), bool)) & ~comp
+                    far = ndi.distance_transform_edt(~scene.free)[comp].min() > 20  # > 1 m from any floor
+                    if not (ring & open_cells).any() and not far:
+                        walled.append((name, goal, k))
+    assert walled == []

@@ -29,6 +29,10 @@ from l3mvn.config import SimConfig
 from l3mvn.scenes.scene import SceneMap
 
 _MARGIN_GAP_CELLS = 3.2  # d(object) + d(free) of a ring cell; a 2-cell ring scores 3, a wall >= 4
+# An object farther than the ring from free floor (a plant in a corner, a tv in a niche) gets a view
+# corridor: the cells between it and its nearest free floor, up to this far (farther: left as is).
+_CORRIDOR_MAX_CELLS = 20
+_CORRIDOR_SLACK_CELLS = 1.5
 _SPECK_MAX_M2 = 0.04  # smaller than a 20 x 20 cm pillar
 _FURNITURE_MAX_M2 = 1.5
 _FURNITURE_MIN_THICKNESS_M = 0.25  # thinner free-standing pieces are partition walls, kept full height
@@ -163,6 +167,7 @@ def wall_grids(scene: SceneMap) -> tuple[np.ndarray, np.ndarray]:
     d_free = ndi.distance_transform_edt(~free) if free.any() else np.full(free.shape, np.inf)
     d_obj = ndi.distance_transform_edt(~objects) if objects.any() else np.full(free.shape, np.inf)
     solid &= d_free + d_obj > _MARGIN_GAP_CELLS
+    solid &= ~_view_corridors(scene.objects, d_free)
     labels, n = ndi.label(solid, structure=np.ones((3, 3), dtype=bool))
     if n == 0:
         return solid, np.zeros_like(solid)
@@ -178,6 +183,32 @@ def wall_grids(scene: SceneMap) -> tuple[np.ndarray, np.ndarray]:
     kind[1:] = np.where(speck, 0, np.where(low, 2, 1))
     grid = kind[labels]
     return grid == 1, grid == 2
+
+
+def _view_corridors(categories: np.ndarray, d_free: np.ndarray) -> np.ndarray:
+    """Never wall in an object: for each footprint (per category, so a plant beside a couch counts
+    on its own) whose nearest free floor lies beyond the ring, the cells with
+    d(footprint) + d(free) <= that distance + slack (the band between the two) are the navmesh's
+    eroded margin, not wall; without this some targets have no visible face."""
+    any_object = categories.any(axis=0)
+    out = np.zeros(any_object.shape, dtype=bool)
+    for channel in categories:
+        if not channel.any():
+            continue
+        labels, _ = ndi.label(channel, structure=np.ones((3, 3), dtype=bool))
+        for k, box in enumerate(ndi.find_objects(labels), start=1):
+            if box is None:
+                continue
+            gap = float(d_free[box][labels[box] == k].min())
+            if gap <= 2.0 or gap > _CORRIDOR_MAX_CELLS:  # 2 cells: the plain ring already opens it
+                continue
+            pad = int(np.ceil(gap + _CORRIDOR_SLACK_CELLS)) + 1
+            r0, c0 = max(box[0].start - pad, 0), max(box[1].start - pad, 0)
+            r1, c1 = min(box[0].stop + pad, out.shape[0]), min(box[1].stop + pad, out.shape[1])
+            d_obj = ndi.distance_transform_edt(labels[r0:r1, c0:c1] != k)
+            band = d_obj + d_free[r0:r1, c0:c1] <= gap + _CORRIDOR_SLACK_CELLS
+            out[r0:r1, c0:c1] |= band & ~any_object[r0:r1, c0:c1]
+    return out
 
 
 def _object_boxes(scene: SceneMap, ceiling: float):
