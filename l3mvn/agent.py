@@ -33,7 +33,8 @@ class AgentConfig:
     """Agent-level constants (spec: "Choosing the long-term goal", "Lessons")."""
 
     map: MapConfig = field(default_factory=MapConfig)
-    frontier: FrontierConfig = field(default_factory=FrontierConfig)
+    # Turning to face a frontier is charged like walking: one 30-degree turn = one 0.25 m step.
+    frontier: FrontierConfig = field(default_factory=lambda: FrontierConfig(turn_cost_m_per_rad=0.25 / (math.pi / 6)))
     # Obstacles grow by 1 cell, not the full agent radius: maps' navmeshes (SemExp channel 0) are
     # already eroded by the radius, and the built-in world keeps walls 2 cells from where the agent's
     # centre may stand, so a 3-cell dilation closes real doorways of Gibson houses.
@@ -294,7 +295,8 @@ class MapAgent:
         return extract_frontiers(sem_map.explored, sem_map.obstacle, sem_map.agent_cell, field_,
                                  sem_map.categories, sem_map.category_names, self.cfg.frontier,
                                  blocked=np.array(self._blocked, dtype=np.int64).reshape(-1, 2),
-                                 blocked_radius_cells=self.cfg.blocked_radius_m / sem_map.resolution_m)
+                                 blocked_radius_cells=self.cfg.blocked_radius_m / sem_map.resolution_m,
+                                 agent_heading=sem_map.agent_heading)
 
     def _select(self, sem_map: SemanticMap) -> None:
         self._since_select = 0

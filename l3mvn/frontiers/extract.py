@@ -49,6 +49,7 @@ def extract_frontiers(
     cfg: FrontierConfig = FrontierConfig(),
     blocked: np.ndarray | None = None,
     blocked_radius_cells: float = 0.0,
+    agent_heading: float | None = None,
 ) -> list[Frontier]:
     """Frontiers of an (H, W) map, best S_CU first, ids 0..n-1 in that order.
 
@@ -57,6 +58,9 @@ def extract_frontiers(
     ``category_names``. blocked: (N, 2) cells the caller is done with (reached or unreachable
     goals); a cluster whose candidate lies within ``blocked_radius_cells`` of one is dropped
     before the far limit, so frontiers beyond it stay eligible once the near ones are used up.
+    agent_heading (radians): with ``cfg.turn_cost_m_per_rad`` > 0, a frontier's cost C is its
+    geodesic distance plus the turning needed to face it, so a frontier straight ahead beats an
+    equally near one behind (turns spend the step budget as forward moves do).
     """
     _validate(explored, obstacle, agent_cell, distance_m, category_maps, category_names, cfg)
     if blocked_radius_cells < 0:
@@ -93,9 +97,10 @@ def extract_frontiers(
     keep = _distance_filter(distances, cfg)
     if keep.size == 0:
         return []
-    utility, score = _cost_utility(sizes[keep], distances[keep], cfg)
-    # Best score first; ties go to the nearer cluster, then to raster order (the label order).
-    ranked = np.lexsort((keep, distances[keep], -score))[: cfg.top_k]
+    costs = distances + _turn_costs(centers, agent_cell, agent_heading, cfg)
+    utility, score = _cost_utility(sizes[keep], costs[keep], cfg)
+    # Best score first; ties go to the cheaper cluster, then to raster order (the label order).
+    ranked = np.lexsort((keep, costs[keep], -score))[: cfg.top_k]
     order = keep[ranked]
     s_cu = _normalise(score[ranked])
     objects = _window_objects(centers[order], category_maps, category_names, cfg.window_cells)
@@ -107,7 +112,7 @@ def extract_frontiers(
             size=int(sizes[i]),
             distance_m=float(distances[i]),
             utility=float(utility[ranked[rank]]),
-            cost=float(distances[i]),
+            cost=float(costs[i]),
             s_cu=float(s_cu[rank]),
             objects=objects[rank],
         )
@@ -259,6 +264,16 @@ def _distance_filter(distances: np.ndarray, cfg: FrontierConfig) -> np.ndarray:
     usable = np.isfinite(distances) & (distances >= cfg.min_distance_m)
     within = usable & (distances <= cfg.max_distance_m)
     return np.flatnonzero(within if within.any() else usable)
+
+
+def _turn_costs(centers: np.ndarray, agent_cell: tuple[int, int], heading: float | None,
+                cfg: FrontierConfig) -> np.ndarray:
+    """Metres charged for turning toward each centre (0 without a heading or a turn cost)."""
+    if heading is None or cfg.turn_cost_m_per_rad == 0.0:
+        return np.zeros(len(centers))
+    bearing = np.arctan2(centers[:, 0] - agent_cell[0], centers[:, 1] - agent_cell[1])
+    error = np.abs((bearing - heading + np.pi) % (2 * np.pi) - np.pi)
+    return cfg.turn_cost_m_per_rad * error
 
 
 def _cost_utility(

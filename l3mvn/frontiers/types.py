@@ -43,6 +43,8 @@ class FrontierConfig:
     edge: str = "largest"
     window_m: float = 3.0
     resolution_m: float = 0.05
+    # Cost of turning to face a frontier, metres per radian (0: the paper's pure geodesic cost).
+    turn_cost_m_per_rad: float = 0.0
 
     def __post_init__(self) -> None:
         if self.utility not in UTILITY_MODES:
@@ -62,7 +64,7 @@ class FrontierConfig:
             )
         if self.top_k is not None and self.top_k < 1:
             raise L3MVNError(f"top_k must be >= 1 or None (keep all), got {self.top_k}")
-        for name in ("cu_lambda", "near_bonus", "near_bonus_m", "window_m"):
+        for name in ("cu_lambda", "near_bonus", "near_bonus_m", "window_m", "turn_cost_m_per_rad"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise L3MVNError(f"{name} must be a finite number >= 0, got {value}")

@@ -36,14 +36,15 @@ def _pick(frontiers: list[Frontier], scores: np.ndarray, reason: str) -> Selecti
 
 
 class NearestFrontier:
-    """Yamauchi (1997): the geodesically nearest frontier."""
+    """Yamauchi (1997): the nearest frontier, by travel cost (geodesic distance, plus turning when the
+    agent charges for it: see FrontierConfig.turn_cost_m_per_rad)."""
 
     name = "frontier"
 
     def select(self, frontiers, sem_map, goal, rng):
         if not frontiers:
             return None
-        d = np.array([f.distance_m for f in frontiers], dtype=np.float64)
+        d = np.array([f.cost for f in frontiers], dtype=np.float64)
         scores = 1.0 - d / max(d.max(), 1e-9) if len(d) > 1 else np.ones(1)
         return _pick(frontiers, scores, "nearest frontier ({f.distance_m:.1f} m)")
 
