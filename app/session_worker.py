@@ -23,7 +23,9 @@ from l3mvn.config import SimConfig, config_hash
 from l3mvn.datasets import EpisodeSet
 from l3mvn.errors import L3MVNError
 from l3mvn.events import EventBus, StepEvent
-from l3mvn.policies import DIRECT_POLICIES, POLICY_NAMES, check_policy, make_policy
+from l3mvn.policies import (
+    DIRECT_POLICIES, LANGUAGE_POLICIES, POLICY_NAMES, PolicyOptions, check_policy, make_policy,
+)
 from l3mvn.scenes.scene import GOAL_CATEGORIES
 from l3mvn.session import EpisodeSession
 from l3mvn.sim.simulator import BuiltinSimulator
@@ -260,9 +262,13 @@ class DashboardController:
             self._envs[key] = BuiltinSimulator(self.episodes.scene_of(episode), self.cfg)
         env = self._envs[key]
         if (key, self.policy_name) not in self._policies:
+            if self.policy_name in LANGUAGE_POLICIES:
+                self._notify(f"loading the language model of {self.policy_name} (a few seconds, once)")
             self._policies[(key, self.policy_name)] = make_policy(self.policy_name, env, self.seed)
         policy = self._policies[(key, self.policy_name)]
-        chash = config_hash(self.cfg, extra={"policy": self.policy_name, "seed": self.seed})
+        # The same hash ``l3mvn eval`` writes for these settings, so dashboard runs can be matched.
+        options = PolicyOptions(scorer=self.scorer if self.policy_name in LANGUAGE_POLICIES else None)
+        chash = config_hash(self.cfg, options, extra={"policy": self.policy_name, "seed": self.seed})
         self._stop_recorder()
         self._session = EpisodeSession(env, policy, policy_name=self.policy_name, config_hash=chash, bus=self.bus)
         self._manual, self._segment_note = None, ""
