@@ -62,15 +62,19 @@ class CostUtility:
 
 
 class RandomSample:
-    """The paper's "random samples on map": a uniformly random unoccupied cell of the local window."""
+    """The paper's "random samples on map": a uniformly random cell of the local window that is
+    neither an obstacle nor explored yet (any non-obstacle cell once the window is all explored), so a
+    sample is a place worth going to rather than one already seen."""
 
     name = "random-sample"
 
     def select(self, frontiers, sem_map, goal, rng):
         win = sem_map.local_window()
         r0, _, c0, _ = win.bounds
-        free = np.argwhere(~win.obstacle)
-        r, c = free[rng.integers(len(free))]
+        candidates = np.argwhere(~win.obstacle & ~win.explored)
+        if len(candidates) == 0:
+            candidates = np.argwhere(~win.obstacle)
+        r, c = candidates[rng.integers(len(candidates))]
         cell = (int(r) + r0, int(c) + c0)
         return Selection(None, cell, np.zeros(len(frontiers)), f"random map cell {cell}")
 
