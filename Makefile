@@ -11,10 +11,11 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --disable-pip-version-check -q --upgrade pip wheel setuptools
 
-# Re-install whenever pyproject.toml changes (the stamp records the last install).
-$(VENV)/.installed: pyproject.toml | $(BIN)/python
+# Re-install whenever pyproject.toml or this file changes (the stamp records the last install).
+# The test run includes Ray (the distributed extra) so the cluster test runs instead of skipping.
+$(VENV)/.installed: pyproject.toml Makefile | $(BIN)/python
 	$(PIP) -q "torch==2.13.0"
-	$(PIP) -q -e ".[test]"
+	$(PIP) -q -e ".[test,distributed]"
 	touch $@
 
 venv: $(VENV)/.installed

@@ -167,16 +167,20 @@ def test_changing_the_target_mid_episode_starts_a_marked_new_segment(ctl):
         ctl.change_target("spaceship")
 
 
-def test_a_finished_episode_counts_in_the_session_metrics(ctl):
-    scene = ctl.scene_keys[0]
-    nearest = min(range(3), key=lambda i: ctl.episodes_of(scene)[i].geodesic_distance_m)
-    before = ctl.snapshot.metrics.episodes
-    _reset(ctl, nearest)
-    ctl.set_speed(60)
-    ctl.run()
-    deadline = time.monotonic() + 15
-    while not ctl.snapshot.event.done and time.monotonic() < deadline:
+def _run_nearest_episode_to_the_end(c, timeout_s: float = 20.0) -> None:
+    scene = c.scene_keys[0]
+    nearest = min(range(3), key=lambda i: c.episodes_of(scene)[i].geodesic_distance_m)
+    _reset(c, nearest)
+    c.set_speed(60)
+    c.run()
+    deadline = time.monotonic() + timeout_s
+    while not c.snapshot.event.done and time.monotonic() < deadline:
         time.sleep(0.05)
+
+
+def test_a_finished_episode_counts_in_the_session_metrics(ctl):
+    before = ctl.snapshot.metrics.episodes
+    _run_nearest_episode_to_the_end(ctl)
     assert ctl.snapshot.event.done and ctl.snapshot.event.result["success"]
     assert ctl.snapshot.metrics.episodes == before + 1 and ctl.snapshot.metrics.sr > 0
     with pytest.raises(L3MVNError, match="is over"):
@@ -186,14 +190,7 @@ def test_a_finished_episode_counts_in_the_session_metrics(ctl):
 def test_a_recorded_episode_is_written_and_listed_on_the_page(dash, ctl, tmp_path):
     ctl.record_dir = tmp_path
     ctl.set_record(True)
-    scene = ctl.scene_keys[0]
-    nearest = min(range(3), key=lambda i: ctl.episodes_of(scene)[i].geodesic_distance_m)
-    _reset(ctl, nearest)
-    ctl.set_speed(60)
-    ctl.run()
-    deadline = time.monotonic() + 20
-    while not ctl.snapshot.event.done and time.monotonic() < deadline:
-        time.sleep(0.05)
+    _run_nearest_episode_to_the_end(ctl)
     ctl.set_record(False)
     files = list(tmp_path.glob("*.rrd"))
     assert len(files) == 1 and files[0].name.endswith("_oracle.rrd")
