@@ -220,7 +220,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from l3mvn.eval.job import EvalJob, is_error_row
     from l3mvn.eval.metrics import format_summary, summarize
     from l3mvn.eval.runner import ResultWriter, check_resumable, done_keys, read_results
-    from l3mvn.policies import PolicyOptions
+    from l3mvn.policies import PolicyOptions, check_options
 
     if args.address and args.backend != "ray":
         raise L3MVNError("--address joins a Ray cluster: add --backend ray")
@@ -232,6 +232,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     cfg = _sim_config(args)
     check_resumable(args.out, args.resume)
     options = PolicyOptions(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise)
+    check_options(args.policy, options)
     job = EvalJob.create(args.dataset, args.split, houses=args.houses, episodes_per_house=args.episodes_per_house,
                          seed=args.seed, sim=cfg, policy=args.policy, options=options,
                          record_dir=args.record_dir if args.record else None)

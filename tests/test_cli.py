@@ -45,6 +45,8 @@ def test_geodesic_rule_is_named_in_the_summary(tiny_dataset, capsys):
     (["eval", "--policy", "oracle", "--set", "max_stepz=3"], "unknown setting 'max_stepz'"),
     (["eval", "--policy", "oracle", "--resume"], "--resume needs --out"),
     (["render", "--scene", "Nowhere"], "unknown scene 'Nowhere'"),
+    (["eval", "--policy", "frontier", "--selection", "official_code"], "apply to language policies only"),
+    (["eval", "--policy", "random-walk", "--seg-noise", "0.2"], "does not read the semantic frames"),
 ])
 def test_bad_input_is_one_line_on_stderr_with_status_2(argv, message, capsys):
     assert main(argv) == 2

@@ -316,3 +316,18 @@ def test_bad_inputs_raise_a_clear_error():
         extract_frontiers(explored, obstacle, (60, 0), distance, none, ())
     with pytest.raises(L3MVNError, match="at the agent cell"):
         extract_frontiers(explored, obstacle, agent, straight_line(explored.shape, (0, 0)), none, ())
+
+
+def test_turn_cost_makes_the_frontier_ahead_cheaper_than_an_equally_near_one_behind():
+    explored, obstacle, _ = two_door_room()
+    agent = (30, 50)  # halfway between the two doors: both frontiers 40 cells away
+    plain = extract(explored, obstacle, agent)
+    assert plain[0].cost == pytest.approx(plain[1].cost)
+    cfg = FrontierConfig(turn_cost_m_per_rad=0.5)
+    shape = explored.shape
+    facing_right = extract_frontiers(explored, obstacle, agent, straight_line(shape, agent),
+                                     np.zeros((0, *shape), bool), (), cfg, agent_heading=0.0)
+    by_side = {f.center[1]: f for f in facing_right}
+    assert by_side[90].cost == pytest.approx(by_side[90].distance_m)
+    assert by_side[10].cost == pytest.approx(by_side[10].distance_m + 0.5 * np.pi, abs=0.05)
+    assert facing_right[0].center[1] == 90

@@ -49,6 +49,16 @@ def check_policy(name: str) -> str:
     return name
 
 
+def check_options(name: str, options: PolicyOptions) -> None:
+    """Refuse settings the policy would ignore (they would still change the config hash)."""
+    resolved = ALIASES.get(check_policy(name), name)
+    language = tuple(LANGUAGE_POLICIES) + tuple(a for a, t in ALIASES.items() if t in LANGUAGE_POLICIES)
+    if resolved not in LANGUAGE_POLICIES and (options.scorer is not None or options.selection != "paper"):
+        raise L3MVNError(f"--scorer and --selection apply to language policies only ({', '.join(language)}), not {name!r}")
+    if resolved in DIRECT_POLICIES and options.seg_noise:
+        raise L3MVNError(f"--seg-noise applies to map-based policies; {name!r} does not read the semantic frames")
+
+
 def make_policy(name: str, env: BuiltinSimulator, seed: int = 0, options: PolicyOptions | None = None,
                 agent_cfg=None):
     """A fresh policy for ``env``. ``agent_cfg`` (an AgentConfig) applies to map-based policies."""
@@ -56,7 +66,8 @@ def make_policy(name: str, env: BuiltinSimulator, seed: int = 0, options: Policy
     from l3mvn.policies.language_policy import LanguageFrontierPolicy
 
     options = options or PolicyOptions()
-    name = ALIASES.get(check_policy(name), name)
+    check_options(name, options)
+    name = ALIASES.get(name, name)
     if name == "oracle":
         return OraclePolicy(env)
     if name == "random-walk":

@@ -1,0 +1,47 @@
+import numpy as np
+
+from l3mvn.frontiers import Frontier
+from l3mvn.mapping import SemanticMap
+from l3mvn.policies import PolicyOptions, check_options
+from l3mvn.policies.global_policies import CostUtility, NearestFrontier, RandomSample
+from l3mvn.errors import L3MVNError
+
+import pytest
+
+
+def _map(explored: np.ndarray, obstacle: np.ndarray) -> SemanticMap:
+    n = explored.shape[0]
+    return SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros_like(explored),
+                       categories=np.zeros((0, n, n), bool), category_names=(), resolution_m=0.05,
+                       start_xy=(0.0, 0.0), agent_cell=(n // 2, n // 2), agent_heading=0.0,
+                       local_cells=n, footprint_radius_cells=3)
+
+
+def _frontier(i, distance, cost, s_cu):
+    return Frontier(id=i, cells=np.array([[i, i]]), center=(i, i), size=10, distance_m=distance,
+                    utility=10.0, cost=cost, s_cu=s_cu)
+
+
+def test_nearest_frontier_ranks_by_travel_cost_and_cost_utility_by_s_cu():
+    frontiers = [_frontier(0, 2.0, 2.0, 0.2), _frontier(1, 1.5, 3.0, 0.9)]
+    rng = np.random.default_rng(0)
+    assert NearestFrontier().select(frontiers, None, "bed", rng).frontier == 0
+    assert CostUtility().select(frontiers, None, "bed", rng).frontier == 1
+
+
+def test_random_sample_draws_unexplored_free_cells_of_the_local_window():
+    explored = np.zeros((40, 40), bool)
+    explored[:, :30] = True
+    obstacle = np.zeros_like(explored)
+    obstacle[:, 35:] = True
+    sem_map, rng = _map(explored, obstacle), np.random.default_rng(3)
+    cells = [RandomSample().select([], sem_map, "bed", rng).cell for _ in range(50)]
+    assert all(30 <= c < 35 for _, c in cells)
+
+
+def test_options_a_policy_would_ignore_are_refused():
+    with pytest.raises(L3MVNError, match="apply to language policies only"):
+        check_options("frontier", PolicyOptions(scorer="roomtype"))
+    with pytest.raises(L3MVNError, match="does not read the semantic frames"):
+        check_options("oracle", PolicyOptions(seg_noise=0.1))
+    check_options("exp+llm", PolicyOptions(selection="official_code"))
