@@ -137,6 +137,7 @@ class EpisodeSession:
             final_distance_m=env.distance_to_goal(), saw_target=self._saw, entered_region=self._entered,
             recent_collision_rate=(sum(f) / len(f)) if len(f) >= 10 else 0.0,
             agent_reported_stuck=bool(getattr(self.policy, "stuck", False)),
+            coverage=self._coverage(),
         )
         success, spl, dtg, cause = score_episode(outcome)
         return EpisodeResult(
@@ -144,5 +145,23 @@ class EpisodeSession:
             policy=self.policy_name, success=success, spl=spl, dtg=dtg, failure=cause, steps=env.steps,
             path_length_m=env.path_length_m, shortest_path_m=outcome.shortest_path_m, rule=env.cfg.success_rule,
             config_hash=self.config_hash, seconds=time.perf_counter() - self._t0,
-            extra={"segments": self.segment + 1} if self.segment else {},
+            extra=self._extra(outcome),
         )
+
+    def _extra(self, outcome: EpisodeOutcome) -> dict:
+        extra: dict = {"segments": self.segment + 1} if self.segment else {}
+        if outcome.coverage is not None:
+            extra["coverage"] = round(outcome.coverage, 3)
+        return extra
+
+    def _coverage(self) -> float | None:
+        """Ground truth for the failure analysis: the share of the floor reachable from the start
+        that the agent's own map marks explored (None when the policy keeps no map)."""
+        decision = self.last_event.decision if self.last_event is not None else None
+        sem_map = decision.map if decision is not None else None
+        reachable = getattr(self.env, "reachable_cells", None)
+        if sem_map is None or self.episode is None or reachable is None:
+            return None
+        rows, cols = reachable(self.episode.start)
+        xs, ys = self.env.scene.cell_center(rows, cols)
+        return float(sem_map.explored_at(xs, ys).mean()) if len(rows) else None

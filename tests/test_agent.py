@@ -53,6 +53,8 @@ def test_agent_finds_the_toilet_in_the_other_room_with_ground_truth_semantics(en
     assert result.success, result.failure
     assert result.steps < 200
     assert events[-1][0].decision.action == Action.STOP
+    # Coverage: the share of the reachable floor the agent's own map explored (for failure analysis).
+    assert 0.0 < result.extra["coverage"] <= 1.0
 
 
 def test_agent_never_stops_before_its_map_shows_the_target(env):

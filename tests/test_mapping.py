@@ -111,6 +111,16 @@ def test_floor_points_mark_explored_but_not_obstacle():
     assert _outside_footprint(smap).sum() > 500
 
 
+def test_explored_at_looks_up_world_points_and_reads_off_map_points_as_unexplored():
+    smap = _mapper().update(_ray_cast(START, 0.0, [(2, 0.0)]), None, START, 0.0)
+    rows, cols = np.nonzero(smap.explored)
+    xs, ys = zip(*(smap.cell_to_world(int(r), int(c)) for r, c in zip(rows[:50], cols[:50])))
+    assert smap.explored_at(np.array(xs), np.array(ys)).all()
+    behind = smap.explored_at(np.array([START.x - 3.0]), np.array([START.y]))  # the camera looks along +x
+    far = smap.explored_at(np.array([START.x + 100.0]), np.array([START.y]))
+    assert not behind[0] and not far[0]
+
+
 def test_points_above_the_obstacle_band_are_ignored():
     # A ceiling at 2.6 m > 0.88 + 0.5 m: neither obstacle nor explored (beyond the agent's footprint).
     smap = _mapper().update(_ray_cast(START, 0.0, [(2, 2.6)]), None, START, 0.0)

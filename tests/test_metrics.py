@@ -27,6 +27,10 @@ def test_spl_caps_at_one_when_walked_less_than_shortest():
 @pytest.mark.parametrize("kw,cause", [
     (dict(in_success_region=False, final_distance_m=2.0), "false_stop"),
     (dict(stopped=False, in_success_region=False, saw_target=False, entered_region=False), "never_saw_target"),
+    (dict(stopped=False, in_success_region=False, saw_target=False, entered_region=False, coverage=0.5),
+     "never_saw_target"),
+    (dict(stopped=False, in_success_region=False, saw_target=False, entered_region=False, coverage=0.95),
+     "unseen_in_explored"),
     (dict(stopped=False, in_success_region=False, entered_region=False), "saw_target_not_reached"),
     (dict(stopped=False, in_success_region=True), "timeout"),
     (dict(stopped=False, in_success_region=False, recent_collision_rate=0.8), "stuck"),

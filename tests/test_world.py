@@ -75,6 +75,40 @@ def test_an_object_deep_in_the_eroded_margin_gets_a_view_corridor_to_the_floor()
     assert walls[0:4, 40:44].all(), "the outer wall behind the plant must stay"
 
 
+def test_a_toilet_in_a_room_the_navmesh_lost_shows_through_a_door_wide_opening():
+    # The navmesh lost the bathroom: the toilet sits 12 cells (0.6 m) south of the west room's
+    # floor, walled in on every side but the narrow margin band.
+    toilet = (slice(45, 53), slice(20, 28))
+    scene = two_rooms(("bed", "toilet"), {"toilet": toilet})
+    nav = scene.navigable.copy()
+    nav[32:, :54] = False
+    scene = SceneMap(name="Lost", floor=0, categories=scene.categories, navigable=nav, objects=scene.objects)
+    free_edge = int(np.flatnonzero(scene.free[:, 24]).max())
+    assert 45 - free_edge > 10, "the test map must put the toilet well away from the floor"
+    walls, _ = wall_grids(scene)
+    mid = (free_edge + 45) // 2
+    opening = np.flatnonzero(~walls[mid, :54])
+    assert opening.size >= 10 and opening.min() <= 20 and opening.max() >= 27, "narrower than the toilet's face"
+    assert walls[mid, :8].all() and walls[mid, 44:54].all(), "the opening spreads beyond a door"
+    assert walls[56:, 20:28].all(), "the wall behind the toilet must stay"
+
+
+def test_unlabelled_furniture_stays_below_the_camera():
+    # A cabinet-sized block (1 m2, 0.5 m thick) in the east room: furniture, built to table height,
+    # so the camera at 0.88 m sees the objects behind it.
+    nav = two_rooms().navigable.copy()
+    nav[20:44, 70:94] = False
+    base = two_rooms()
+    scene = SceneMap(name="Cabinet", floor=0, categories=base.categories, navigable=nav, objects=base.objects)
+    walls, furniture = wall_grids(scene)
+    assert furniture.any() and not walls[30, 80]
+    world = build_world(scene, SimConfig())
+    tops = world.vertices[world.triangles[world.tri_category == 0]][..., 2]
+    heights = np.unique(np.round(tops, 3))
+    assert 0.75 in heights and not ((heights > 0.75) & (heights < SimConfig().wall_height_m)).any()
+    assert 0.75 < SimConfig().camera_height_m
+
+
 def test_one_cell_speck_is_removed_but_one_cell_wall_between_rooms_is_kept():
     scene = two_rooms()
     assert not scene.free[SPECK] and not scene.object_any[SPECK], "the map must contain the speck"

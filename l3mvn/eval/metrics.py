@@ -14,6 +14,9 @@ FAILURE_CAUSES = (
     "success",
     "false_stop",  # called stop outside the success region
     "never_saw_target",  # ran out of steps without the target ever in view
+    # ... although the agent's map covered most of the reachable floor: the target hides behind
+    # something (a toilet behind a sink in a narrow bathroom) and shows only from a few places
+    "unseen_in_explored",
     "saw_target_not_reached",  # saw it, never entered the success region
     "timeout",  # was in the success region at some point but never stopped there
     "stuck",  # ran out of steps while colliding most of the time
@@ -34,6 +37,8 @@ class EpisodeOutcome:
     entered_region: bool
     recent_collision_rate: float
     agent_reported_stuck: bool = False
+    # Fraction of the reachable floor the agent's map marks explored (None: the policy keeps no map).
+    coverage: float | None = None
 
 
 @dataclass
@@ -70,6 +75,8 @@ def _round(v: float) -> float | None:
 
 
 STUCK_COLLISION_RATE = 0.5
+# Coverage above which a target never seen counts as hidden rather than not yet explored.
+EXPLORED_COVERAGE = 0.9
 
 
 def score_episode(o: EpisodeOutcome) -> tuple[float, float, float, str]:
@@ -86,6 +93,8 @@ def score_episode(o: EpisodeOutcome) -> tuple[float, float, float, str]:
         cause = "timeout"
     elif o.saw_target:
         cause = "saw_target_not_reached"
+    elif o.coverage is not None and o.coverage >= EXPLORED_COVERAGE:
+        cause = "unseen_in_explored"
     else:
         cause = "never_saw_target"
     return success, spl, o.final_distance_m, cause

@@ -151,6 +151,16 @@ class SemanticMap:
             self.start_xy[1] + (row - half + 0.5) * self.resolution_m,
         )
 
+    def explored_at(self, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+        """Whether each world point (x, y) lies on an explored cell; points off the map are not."""
+        half = self.size // 2
+        rows = np.floor((np.asarray(ys) - self.start_xy[1]) / self.resolution_m).astype(np.int64) + half
+        cols = np.floor((np.asarray(xs) - self.start_xy[0]) / self.resolution_m).astype(np.int64) + half
+        ok = (rows >= 0) & (rows < self.size) & (cols >= 0) & (cols < self.size)
+        out = np.zeros(rows.shape, dtype=bool)
+        out[ok] = self.explored[rows[ok], cols[ok]]
+        return out
+
     def category(self, name: str) -> np.ndarray:
         if name not in self.category_names:
             raise L3MVNError(f"unknown map category {name!r}; valid: {', '.join(self.category_names)}")

@@ -13,6 +13,7 @@ import math
 from functools import cached_property
 
 import numpy as np
+from scipy import ndimage as ndi
 
 from l3mvn.config import SimConfig
 from l3mvn.errors import L3MVNError
@@ -37,6 +38,7 @@ class BuiltinSimulator:
         self._steps = 0
         self._path = 0.0
         self._stopped = False
+        self._walk_labels: np.ndarray | None = None
 
     @cached_property
     def renderer(self) -> Renderer:
@@ -132,6 +134,15 @@ class BuiltinSimulator:
         return self.region(self.episode.goal).shortest_path_length(start.x, start.y)
 
     # --- mechanics ---------------------------------------------------------------------------
+    def reachable_cells(self, start: Pose) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of the walkable cells connected to ``start`` (ground truth for analysis)."""
+        if self._walk_labels is None:
+            self._walk_labels, _ = ndi.label(self.scene.walkable, structure=np.ones((3, 3), dtype=bool))
+        r, c = self.scene.cell_of(start.x, start.y)
+        if not self.scene.in_bounds(r, c) or self._walk_labels[r, c] == 0:
+            return np.empty(0, np.int64), np.empty(0, np.int64)
+        return np.nonzero(self._walk_labels == self._walk_labels[r, c])
+
     def is_walkable(self, x: float, y: float) -> bool:
         r, c = self.scene.cell_of(x, y)
         return self.scene.in_bounds(r, c) and bool(self.scene.walkable[r, c])

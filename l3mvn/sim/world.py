@@ -9,9 +9,13 @@ artefacts are repaired first, because the camera would otherwise show them to th
   most ``_MARGIN_GAP_CELLS`` between an object and the free floor is that ring and becomes floor. A real
   wall behind an object is further from the free floor (the navmesh is eroded from walls too), so it
   survives;
+* an object farther from the free floor than that ring stands in floor the navmesh lost (a bathroom
+  too narrow for it, a niche): a door-wide opening between the object and its nearest floor becomes
+  floor (``_view_corridors``), so the object shows from the house as it would through a door;
 * wall components smaller than ``_SPECK_MAX_M2`` are rasterisation specks and become floor, while a
   one-cell wall line between rooms is long and stays. Compact free-standing components up to
-  ``_FURNITURE_MAX_M2`` are unlabelled furniture (a kitchen island, a cabinet) and are built low.
+  ``_FURNITURE_MAX_M2`` are unlabelled furniture (a kitchen island, a cabinet) and are built to table
+  height, below the camera.
 
 Meshing emits only boundary faces and merges them into runs (walls) and rectangles (tops), so a
 500x700-cell Gibson floor stays at tens of thousands of triangles. The floor is triangles 0 and 1.
@@ -29,15 +33,22 @@ from l3mvn.config import SimConfig
 from l3mvn.scenes.scene import SceneMap
 
 _MARGIN_GAP_CELLS = 3.2  # d(object) + d(free) of a ring cell; a 2-cell ring scores 3, a wall >= 4
-# An object farther than the ring from free floor (a plant in a corner, a tv in a niche) gets a view
-# corridor: the cells between it and its nearest free floor, up to this far (farther: left as is).
+# An object farther than the ring from free floor (a plant in a corner, a tv in a niche, a toilet in a
+# bathroom whose floor the navmesh lost) gets a view corridor: the cells between it and its nearest free
+# floor, up to this far (farther: left as is), and a door-wide passage along it. A slit only as wide
+# as the eroded margin (the first version) showed Gibson toilets from 1-3 cells of the house: the
+# agent mapped the whole floor around them and never saw them.
 _CORRIDOR_MAX_CELLS = 20
 _CORRIDOR_SLACK_CELLS = 1.5
+_CORRIDOR_HALF_WIDTH_CELLS = 8  # a 0.8 m door
 _SPECK_MAX_M2 = 0.04  # smaller than a 20 x 20 cm pillar
 _FURNITURE_MAX_M2 = 1.5
 _FURNITURE_MIN_THICKNESS_M = 0.25  # thinner free-standing pieces are partition walls, kept full height
-_FURNITURE_HEIGHT_M = 0.9
-_ITEM_SUPPORT_M = 0.75  # an item with no labelled furniture below stands on an unlabelled table
+# Unlabelled furniture is built to table height, the height at which an item with no labelled
+# furniture below it stands. At 0.9 m (a counter) it rose above the 0.88 m camera and hid every
+# object behind it: toilets behind bathroom partitions were mapped around and never seen.
+_ITEM_SUPPORT_M = 0.75
+_FURNITURE_HEIGHT_M = _ITEM_SUPPORT_M
 
 _WALL_RGB = (0.86, 0.83, 0.76)
 _FLOOR_RGB = (0.62, 0.52, 0.42)
@@ -167,7 +178,7 @@ def wall_grids(scene: SceneMap) -> tuple[np.ndarray, np.ndarray]:
     d_free = ndi.distance_transform_edt(~free) if free.any() else np.full(free.shape, np.inf)
     d_obj = ndi.distance_transform_edt(~objects) if objects.any() else np.full(free.shape, np.inf)
     solid &= d_free + d_obj > _MARGIN_GAP_CELLS
-    solid &= ~_view_corridors(scene.objects, d_free)
+    solid &= ~_view_corridors(scene.objects, free)
     labels, n = ndi.label(solid, structure=np.ones((3, 3), dtype=bool))
     if n == 0:
         return solid, np.zeros_like(solid)
@@ -185,13 +196,20 @@ def wall_grids(scene: SceneMap) -> tuple[np.ndarray, np.ndarray]:
     return grid == 1, grid == 2
 
 
-def _view_corridors(categories: np.ndarray, d_free: np.ndarray) -> np.ndarray:
+def _view_corridors(categories: np.ndarray, free: np.ndarray) -> np.ndarray:
     """Never wall in an object: for each footprint (per category, so a plant beside a couch counts
-    on its own) whose nearest free floor lies beyond the ring, the cells with
-    d(footprint) + d(free) <= that distance + slack (the band between the two) are the navmesh's
-    eroded margin, not wall; without this some targets have no visible face."""
+    on its own) whose nearest free floor lies beyond the ring, two sets of cells are floor, not wall:
+    the band d(footprint) + d(free) <= that distance + slack (the navmesh's eroded margin between
+    the two) and, widened to a door, the room the navmesh lost between them (a bathroom around its
+    toilet). Real walls are thin lines; solid this thick next to an object is floor too narrow for
+    the navmesh or clutter. A wall behind the object (seen from the floor) or farther than half the
+    gap from both stays."""
     any_object = categories.any(axis=0)
     out = np.zeros(any_object.shape, dtype=bool)
+    if not free.any():
+        return out
+    d_free, nearest = ndi.distance_transform_edt(~free, return_indices=True)
+    w = _CORRIDOR_HALF_WIDTH_CELLS
     for channel in categories:
         if not channel.any():
             continue
@@ -199,15 +217,27 @@ def _view_corridors(categories: np.ndarray, d_free: np.ndarray) -> np.ndarray:
         for k, box in enumerate(ndi.find_objects(labels), start=1):
             if box is None:
                 continue
-            gap = float(d_free[box][labels[box] == k].min())
+            member = labels[box] == k
+            gap = float(d_free[box][member].min())
             if gap <= 2.0 or gap > _CORRIDOR_MAX_CELLS:  # 2 cells: the plain ring already opens it
                 continue
-            pad = int(np.ceil(gap + _CORRIDOR_SLACK_CELLS)) + 1
+            pad = int(np.ceil(gap + 2 * w)) + 1
             r0, c0 = max(box[0].start - pad, 0), max(box[1].start - pad, 0)
             r1, c1 = min(box[0].stop + pad, out.shape[0]), min(box[1].stop + pad, out.shape[1])
             d_obj = ndi.distance_transform_edt(labels[r0:r1, c0:c1] != k)
             band = d_obj + d_free[r0:r1, c0:c1] <= gap + _CORRIDOR_SLACK_CELLS
-            out[r0:r1, c0:c1] |= band & ~any_object[r0:r1, c0:c1]
+            # The lost room: the same band with a door's slack (its half-width at the middle is
+            # sqrt(slack (2 gap + slack)) / 2), kept to cells within gap / 2 of the footprint or of the
+            # floor (every cell of the shortest line is) and not behind the footprint seen from the floor.
+            slack = max(_CORRIDOR_SLACK_CELLS, float(np.sqrt(gap * gap + 4 * w * w) - gap))
+            i = int(np.argmin(np.where(member, d_free[box], np.inf)))
+            edge = np.array(np.unravel_index(i, member.shape)) + (box[0].start, box[1].start)
+            v = nearest[:, edge[0], edge[1]] - (np.argwhere(member).mean(axis=0) + (box[0].start, box[1].start))
+            rows, cols = np.mgrid[r0:r1, c0:c1]
+            ahead = (rows - edge[0]) * v[0] + (cols - edge[1]) * v[1] >= -float(np.hypot(*v))
+            d_fl = d_free[r0:r1, c0:c1]
+            passage = (d_obj + d_fl <= gap + slack) & (np.minimum(d_obj, d_fl) <= gap / 2) & ahead
+            out[r0:r1, c0:c1] |= (band | passage) & ~any_object[r0:r1, c0:c1]
     return out
 
 
