@@ -165,7 +165,7 @@ class MapAgent:
             return self._decide(obs, Action.TURN_LEFT, sem_map, None, "look-around",
                                 "initial 360-degree look", t, None, None)
         else:
-            if self._since_select >= self.cfg.replan_every or self._ltg is None:
+            if self._reselect_due():
                 frontiers_ms, policy_ms = self._reselect(sem_map)
             goal, kind, reason = self._ltg, self._ltg_kind, self._ltg_reason
         t["select"] = time.perf_counter()
@@ -217,6 +217,14 @@ class MapAgent:
                             extra_ms={"frontiers": frontiers_ms, "policy": policy_ms})
 
     # --- pieces ------------------------------------------------------------------------------
+    def _reselect_due(self) -> bool:
+        """Every ``replan_every`` steps, at once when forced (inf), never while a policy that keeps
+        its goal (random sample) still pursues one."""
+        if self._ltg is None or self._since_select == math.inf:
+            return True
+        keeps = self._ltg_kind == "random" and getattr(self.global_policy, "keeps_goal", False)
+        return self._since_select >= self.cfg.replan_every and not keeps
+
     def _reselect(self, sem_map: SemanticMap) -> tuple[float, float]:
         """Extract frontiers and let the global policy choose; returns (frontier ms, policy ms)."""
         t0 = time.perf_counter()

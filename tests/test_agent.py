@@ -136,3 +136,49 @@ def test_reached_frontiers_are_not_chosen_again(env):
         assert gaps.min() > radius
         chosen += 1
     assert chosen > 0
+
+
+def test_random_sample_keeps_its_goal_until_reached_while_frontier_policies_reselect(env):
+    from l3mvn.policies.global_policies import RandomSample
+
+    agent = MapAgent(RandomSample(), env.categories, env.cfg, AgentConfig())
+    episode = _episode()
+    obs = env.reset(episode)
+    agent.reset(episode)
+    agent.change_target("couch")  # absent: the agent only explores
+    goals, legs = [], []
+    for _ in range(150):
+        d = agent.act(obs)
+        obs = env.step(d.action)
+        if d.goal_kind != "random":
+            continue
+        if goals and d.long_term_goal == goals[-1]:
+            legs[-1] += 1
+        else:
+            goals.append(d.long_term_goal)
+            legs.append(1)
+    assert len(goals) >= 2 and max(legs) > agent.cfg.replan_every
+
+
+
+def test_frontier_oracle_heads_for_the_frontier_nearest_the_goal_and_succeeds(env):
+    from l3mvn.policies.oracle import FrontierOracle
+
+    oracle = FrontierOracle(env)
+    result, events = _run(env, MapAgent(oracle, env.categories, env.cfg, AgentConfig()), _episode())
+    assert result.success, result.failure
+    region = env.region("toilet")
+    checked = 0
+    for event, _ in events:
+        d = event.decision
+        if d.goal_kind != "frontier" or len(d.frontiers) < 2 or not (d.reason or "").startswith("oracle"):
+            continue
+        m = d.map
+
+        def to_goal(f):
+            return min(region.distance_at(*m.cell_to_world(int(r), int(c))) for r, c in f.cells)
+
+        totals = [f.cost + to_goal(f) for f in d.frontiers]
+        assert d.frontiers[d.chosen_frontier].cost + to_goal(d.frontiers[d.chosen_frontier]) == min(totals)
+        checked += 1
+    assert checked > 0

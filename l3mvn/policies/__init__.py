@@ -2,9 +2,10 @@
 ``reset(episode)`` and ``act(observation) -> Action | Decision``.
 
 ``oracle`` and ``random-walk`` act directly; every other name is the map-based agent with a different
-global policy (only the choice of long-term goal differs between them). The paper's Table II
-ablations are names too: ``exp`` (= cost-utility), ``exp+llm`` (= l3mvn-ff) and ``near+llm``; ground
-truth vs noisy segmentation is ``--seg-noise``.
+global policy (only the choice of long-term goal differs between them). ``oracle-frontier`` is that
+agent with a global policy that reads the ground truth: the ceiling for any frontier prior. The
+paper's Table II ablations are names too: ``exp`` (= cost-utility), ``exp+llm`` (= l3mvn-ff) and
+``near+llm``; ground truth vs noisy segmentation is ``--seg-noise``.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 from l3mvn.errors import L3MVNError
 from l3mvn.policies.global_policies import GLOBAL_POLICIES
 from l3mvn.policies.language_policy import SELECTIONS
-from l3mvn.policies.oracle import OraclePolicy, RandomWalkPolicy
+from l3mvn.policies.oracle import FrontierOracle, OraclePolicy, RandomWalkPolicy
 from l3mvn.sim.simulator import BuiltinSimulator
 
 DIRECT_POLICIES = ("oracle", "random-walk")
@@ -25,7 +26,9 @@ LANGUAGE_POLICIES = {
     "near+llm": ("feedforward", "nearest", "feedforward"),
 }
 ALIASES = {"exp": "cost-utility", "exp+llm": "l3mvn-ff"}
-POLICY_NAMES: tuple[str, ...] = DIRECT_POLICIES + tuple(GLOBAL_POLICIES) + tuple(LANGUAGE_POLICIES) + tuple(ALIASES)
+POLICY_NAMES: tuple[str, ...] = (
+    DIRECT_POLICIES + tuple(GLOBAL_POLICIES) + ("oracle-frontier",) + tuple(LANGUAGE_POLICIES) + tuple(ALIASES)
+)
 
 
 @dataclass(frozen=True)
@@ -75,6 +78,8 @@ def make_policy(name: str, env: BuiltinSimulator, seed: int = 0, options: Policy
     if name in LANGUAGE_POLICIES:
         scorer, exploration, paradigm = LANGUAGE_POLICIES[name]
         global_policy = LanguageFrontierPolicy(name, options.scorer or scorer, exploration, options.selection, paradigm)
+    elif name == "oracle-frontier":
+        global_policy = FrontierOracle(env)
     else:
         global_policy = GLOBAL_POLICIES[name]()
     if options.seg_noise:

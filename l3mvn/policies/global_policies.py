@@ -67,6 +67,10 @@ class RandomSample:
     sample is a place worth going to rather than one already seen."""
 
     name = "random-sample"
+    # A sampled goal stands until reached or found unreachable: re-sampled every 10 steps (the
+    # frontier policies' period) the agent walked 10-step legs in random directions, and 25 of its 35
+    # failures on the dev houses ran out of steps with a median 62% of the floor mapped.
+    keeps_goal = True
 
     def select(self, frontiers, sem_map, goal, rng):
         win = sem_map.local_window()

@@ -1,7 +1,9 @@
-"""Ground-truth policies: the shortest-path oracle and the paper's random walk.
+"""Ground-truth policies: the shortest-path oracle, the frontier oracle and the paper's random walk.
 
 The oracle is a check of the simulator and the metrics, not a method: it reads the environment's
 ground truth (a geodesic field over the cells where the agent's centre may stand) and walks downhill.
+The frontier oracle is a ceiling, not a method either: the map-based agent with a global policy that
+knows where the goal is, which bounds what any language prior choosing among frontiers can reach.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import zlib
 import numpy as np
 
 from l3mvn.eval.geodesic import geodesic_field
+from l3mvn.policies.global_policies import Selection
 from l3mvn.sim.simulator import BuiltinSimulator
 from l3mvn.sim.types import Action, Episode, Observation, Pose
 
@@ -65,6 +68,43 @@ class OraclePolicy:
     def _value(self, x: float, y: float) -> float:
         r, c = self.env.scene.cell_of(x, y)
         return float(self._field[r, c]) if self.env.scene.in_bounds(r, c) else math.inf
+
+
+class FrontierOracle:
+    """Global policy: the frontier that minimises (travel cost to it + ground-truth geodesic distance
+    from it to the goal's success region). Same agent, same frontiers, perfect prior."""
+
+    name = "oracle-frontier"
+
+    def __init__(self, env: BuiltinSimulator) -> None:
+        self.env = env
+
+    def select(self, frontiers, sem_map, goal, rng):
+        if not frontiers:
+            return None
+        region = self.env.region(goal)
+        half, res = sem_map.size // 2, sem_map.resolution_m
+        cost = np.array([f.cost for f in frontiers], dtype=np.float64)
+        to_goal = np.empty(len(frontiers))
+        for i, f in enumerate(frontiers):
+            xs = sem_map.start_xy[0] + (f.cells[:, 1] - half + 0.5) * res
+            ys = sem_map.start_xy[1] + (f.cells[:, 0] - half + 0.5) * res
+            to_goal[i] = _field_min(region.distance_m, xs, ys, region.resolution_m)
+        total = cost + to_goal if np.isfinite(to_goal).any() else cost  # none on the true floor: nearest
+        i = int(np.argmin(total))
+        finite = np.where(np.isfinite(total), total, total[np.isfinite(total)].max())
+        scores = 1.0 - (finite - finite.min()) / max(float(np.ptp(finite)), 1e-9)
+        return Selection(i, frontiers[i].center, scores,
+                         f"oracle: frontier {frontiers[i].id}, {cost[i]:.1f} m away, {to_goal[i]:.1f} m on to the "
+                         f"{goal} (ground truth)")
+
+
+def _field_min(field: np.ndarray, xs: np.ndarray, ys: np.ndarray, resolution_m: float) -> float:
+    """Smallest value of a scene-grid field at world points (points off the grid read inf)."""
+    rows, cols = np.floor(ys / resolution_m).astype(np.int64), np.floor(xs / resolution_m).astype(np.int64)
+    ok = (rows >= 0) & (rows < field.shape[0]) & (cols >= 0) & (cols < field.shape[1])
+    return float(field[rows[ok], cols[ok]].min()) if ok.any() else math.inf
+
 
 class RandomWalkPolicy:
     """Uniformly random actions over the full action space (the paper's random-walk baseline)."""
