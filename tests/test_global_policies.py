@@ -39,6 +39,19 @@ def test_random_sample_draws_unexplored_free_cells_of_the_local_window():
     assert all(30 <= c < 35 for _, c in cells)
 
 
+def test_random_sample_skips_unexplored_cells_the_map_walls_off_from_the_agent():
+    # The agent's room (rows 5..34, cols 5..24) is mapped closed; beyond its walls lies unexplored space.
+    explored = np.zeros((40, 40), bool)
+    explored[5:35, 5:25] = True
+    explored[18:22, 18:25] = False  # an unexplored alcove inside the room
+    obstacle = np.zeros_like(explored)
+    obstacle[4, 4:26] = obstacle[35, 4:26] = True
+    obstacle[4:36, 4] = obstacle[4:36, 25] = True
+    sem_map, rng = _map(explored, obstacle), np.random.default_rng(5)
+    cells = {RandomSample().select([], sem_map, "bed", rng).cell for _ in range(50)}
+    assert cells and all(18 <= r < 22 and 18 <= c < 25 for r, c in cells)
+
+
 def test_options_a_policy_would_ignore_are_refused():
     with pytest.raises(L3MVNError, match="apply to language policies only"):
         check_options("frontier", PolicyOptions(scorer="roomtype"))

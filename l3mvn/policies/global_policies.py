@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
+import cv2
 import numpy as np
 
 from l3mvn.frontiers import Frontier
@@ -64,7 +65,8 @@ class CostUtility:
 class RandomSample:
     """The paper's "random samples on map": a uniformly random cell of the local window that is
     neither an obstacle nor explored yet (any non-obstacle cell once the window is all explored), so a
-    sample is a place worth going to rather than one already seen."""
+    sample is a place worth going to rather than one already seen, and that the map does not wall off
+    from the agent."""
 
     name = "random-sample"
     # A sampled goal stands until reached or found unreachable: re-sampled every 10 steps (the
@@ -75,9 +77,14 @@ class RandomSample:
     def select(self, frontiers, sem_map, goal, rng):
         win = sem_map.local_window()
         r0, _, c0, _ = win.bounds
-        candidates = np.argwhere(~win.obstacle & ~win.explored)
+        # Only cells the map does not already wall off from the agent (the outside of a house whose
+        # outer wall is mapped, a closed room): a goal there costs steps until found unreachable.
+        _, labels = cv2.connectedComponents((~win.obstacle).view(np.uint8), connectivity=8)
+        own = labels[win.agent_cell]
+        reachable = labels == own if own else ~win.obstacle  # (0: the agent stands on a mapped obstacle)
+        candidates = np.argwhere(reachable & ~win.explored)
         if len(candidates) == 0:
-            candidates = np.argwhere(~win.obstacle)
+            candidates = np.argwhere(reachable)
         r, c = candidates[rng.integers(len(candidates))]
         cell = (int(r) + r0, int(c) + c0)
         return Selection(None, cell, np.zeros(len(frontiers)), f"random map cell {cell}")
