@@ -175,10 +175,11 @@ def wall_grids(scene: SceneMap) -> tuple[np.ndarray, np.ndarray]:
     """(walls, furniture): non-free, non-object cells cleaned of the object ring and specks."""
     free, objects = scene.free, scene.object_any
     solid = ~free & ~objects
-    d_free = ndi.distance_transform_edt(~free) if free.any() else np.full(free.shape, np.inf)
     d_obj = ndi.distance_transform_edt(~objects) if objects.any() else np.full(free.shape, np.inf)
-    solid &= d_free + d_obj > _MARGIN_GAP_CELLS
-    solid &= ~_view_corridors(scene.objects, free)
+    if free.any():
+        d_free, nearest = ndi.distance_transform_edt(~free, return_indices=True)
+        solid &= d_free + d_obj > _MARGIN_GAP_CELLS
+        solid &= ~_view_corridors(scene.objects, d_free, nearest)
     labels, n = ndi.label(solid, structure=np.ones((3, 3), dtype=bool))
     if n == 0:
         return solid, np.zeros_like(solid)
@@ -196,19 +197,16 @@ def wall_grids(scene: SceneMap) -> tuple[np.ndarray, np.ndarray]:
     return grid == 1, grid == 2
 
 
-def _view_corridors(categories: np.ndarray, free: np.ndarray) -> np.ndarray:
+def _view_corridors(categories: np.ndarray, d_free: np.ndarray, nearest: np.ndarray) -> np.ndarray:
     """Never wall in an object: for each footprint (per category, so a plant beside a couch counts
     on its own) whose nearest free floor lies beyond the ring, two sets of cells are floor, not wall:
     the band d(footprint) + d(free) <= that distance + slack (the navmesh's eroded margin between
     the two) and, widened to a door, the room the navmesh lost between them (a bathroom around its
     toilet). Real walls are thin lines; solid this thick next to an object is floor too narrow for
     the navmesh or clutter. A wall behind the object (seen from the floor) or farther than half the
-    gap from both stays."""
+    gap from both stays. ``d_free`` and ``nearest``: distance to and index of the nearest free cell."""
     any_object = categories.any(axis=0)
     out = np.zeros(any_object.shape, dtype=bool)
-    if not free.any():
-        return out
-    d_free, nearest = ndi.distance_transform_edt(~free, return_indices=True)
     w = _CORRIDOR_HALF_WIDTH_CELLS
     for channel in categories:
         if not channel.any():
@@ -225,7 +223,8 @@ def _view_corridors(categories: np.ndarray, free: np.ndarray) -> np.ndarray:
             r0, c0 = max(box[0].start - pad, 0), max(box[1].start - pad, 0)
             r1, c1 = min(box[0].stop + pad, out.shape[0]), min(box[1].stop + pad, out.shape[1])
             d_obj = ndi.distance_transform_edt(labels[r0:r1, c0:c1] != k)
-            band = d_obj + d_free[r0:r1, c0:c1] <= gap + _CORRIDOR_SLACK_CELLS
+            d_fl = d_free[r0:r1, c0:c1]
+            band = d_obj + d_fl <= gap + _CORRIDOR_SLACK_CELLS
             # The lost room: the same band with a door's slack (its half-width at the middle is
             # sqrt(slack (2 gap + slack)) / 2), kept to cells within gap / 2 of the footprint or of the
             # floor (every cell of the shortest line is) and not behind the footprint seen from the floor.
@@ -235,7 +234,6 @@ def _view_corridors(categories: np.ndarray, free: np.ndarray) -> np.ndarray:
             v = nearest[:, edge[0], edge[1]] - (np.argwhere(member).mean(axis=0) + (box[0].start, box[1].start))
             rows, cols = np.mgrid[r0:r1, c0:c1]
             ahead = (rows - edge[0]) * v[0] + (cols - edge[1]) * v[1] >= -float(np.hypot(*v))
-            d_fl = d_free[r0:r1, c0:c1]
             passage = (d_obj + d_fl <= gap + slack) & (np.minimum(d_obj, d_fl) <= gap / 2) & ahead
             out[r0:r1, c0:c1] |= (band | passage) & ~any_object[r0:r1, c0:c1]
     return out
