@@ -187,9 +187,9 @@ class MapAgent:
         self._unreachable = 0 if plan.reachable else self._unreachable + 1
         if plan.reached and kind == "target":
             action, reason = Action.STOP, f"{self.goal} within {plan.distance_to_goal_m:.2f} m: stop"
-        elif kind == "target" and not plan.reachable and _straight_m(sem_map, goal) <= self.cfg.stop_distance_m:
+        elif kind == "target" and not plan.reachable and (near := _straight_m(sem_map, goal)) <= self.cfg.stop_distance_m:
             # Seen over a counter or through a gap the map closes: as near as the free space allows.
-            action, reason = Action.STOP, f"{self.goal} {_straight_m(sem_map, goal):.2f} m away (no path closer): stop"
+            action, reason = Action.STOP, f"{self.goal} {near:.2f} m away (no path closer): stop"
         elif kind in ("candidate", "target") and self._unreachable >= self.cfg.escape_after_unreachable and (
             kind == "candidate" or self._target_escapes >= self.cfg.target_escapes
         ):

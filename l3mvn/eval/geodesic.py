@@ -59,6 +59,16 @@ class GoalRegion:
             return math.inf
         return float(self.distance_m[r, c])
 
+    def distances_at(self, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+        """``distance_at`` for arrays of world points (points off the grid read inf)."""
+        rows = np.floor(np.asarray(ys) / self.resolution_m).astype(np.int64)
+        cols = np.floor(np.asarray(xs) / self.resolution_m).astype(np.int64)
+        h, w = self.distance_m.shape
+        ok = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+        out = np.full(rows.shape, np.inf)
+        out[ok] = self.distance_m[rows[ok], cols[ok]]
+        return out
+
     def contains(self, x: float, y: float) -> bool:
         return self.distance_at(x, y) == 0.0
 

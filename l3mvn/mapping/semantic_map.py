@@ -143,8 +143,8 @@ class SemanticMap:
             )
         return row, col
 
-    def cell_to_world(self, row: int, col: int) -> tuple[float, float]:
-        """World (x, y) of the cell's centre."""
+    def cell_to_world(self, row, col):
+        """World (x, y) of the cell's centre; rows and columns may be arrays."""
         half = self.size // 2
         return (
             self.start_xy[0] + (col - half + 0.5) * self.resolution_m,

@@ -83,27 +83,22 @@ class FrontierOracle:
         if not frontiers:
             return None
         region = self.env.region(goal)
-        half, res = sem_map.size // 2, sem_map.resolution_m
         cost = np.array([f.cost for f in frontiers], dtype=np.float64)
-        to_goal = np.empty(len(frontiers))
-        for i, f in enumerate(frontiers):
-            xs = sem_map.start_xy[0] + (f.cells[:, 1] - half + 0.5) * res
-            ys = sem_map.start_xy[1] + (f.cells[:, 0] - half + 0.5) * res
-            to_goal[i] = _field_min(region.distance_m, xs, ys, region.resolution_m)
-        total = cost + to_goal if np.isfinite(to_goal).any() else cost  # none on the true floor: nearest
+        to_goal = np.array([
+            region.distances_at(*sem_map.cell_to_world(f.cells[:, 0], f.cells[:, 1])).min() for f in frontiers
+        ])
+        if not np.isfinite(to_goal).any():
+            # Frontier cells off the ground-truth floor everywhere (early, in a narrow spot): say so.
+            i = int(np.argmin(cost))
+            return Selection(i, frontiers[i].center, 1.0 - cost / max(float(cost.max()), 1e-9),
+                             f"oracle: no frontier on the ground-truth floor, nearest one ({cost[i]:.1f} m)")
+        total = cost + to_goal
         i = int(np.argmin(total))
         finite = np.where(np.isfinite(total), total, total[np.isfinite(total)].max())
         scores = 1.0 - (finite - finite.min()) / max(float(np.ptp(finite)), 1e-9)
         return Selection(i, frontiers[i].center, scores,
                          f"oracle: frontier {frontiers[i].id}, {cost[i]:.1f} m away, {to_goal[i]:.1f} m on to the "
                          f"{goal} (ground truth)")
-
-
-def _field_min(field: np.ndarray, xs: np.ndarray, ys: np.ndarray, resolution_m: float) -> float:
-    """Smallest value of a scene-grid field at world points (points off the grid read inf)."""
-    rows, cols = np.floor(ys / resolution_m).astype(np.int64), np.floor(xs / resolution_m).astype(np.int64)
-    ok = (rows >= 0) & (rows < field.shape[0]) & (cols >= 0) & (cols < field.shape[1])
-    return float(field[rows[ok], cols[ok]].min()) if ok.any() else math.inf
 
 
 class RandomWalkPolicy:
