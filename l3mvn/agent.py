@@ -60,13 +60,17 @@ class AgentConfig:
     # A reached or unreachable exploration goal blocks frontiers whose centre lies this close to it.
     blocked_radius_m: float = 1.0
     max_reselect: int = 3  # exploration goals tried within one step before walking on
+    # An exploration goal the agent has not come 0.5 m closer to in this many steps is given up like
+    # an unreachable one: a path through unknown space that keeps meeting new walls stays "reachable"
+    # while the agent circles (random-sample kept such goals for 480 steps on the dev houses).
+    goal_patience_steps: int = 40
     seg_noise: float = 0.0
 
     def __post_init__(self) -> None:
         if self.frontier_reached_m < self.frontier.min_distance_m:
             raise L3MVNError("frontier_reached_m must be >= the minimum frontier distance (else a dead zone)")
-        if self.replan_every < 1 or self.target_min_cells < 1:
-            raise L3MVNError("replan_every and target_min_cells must be >= 1")
+        if self.replan_every < 1 or self.target_min_cells < 1 or self.goal_patience_steps < 1:
+            raise L3MVNError("replan_every, target_min_cells and goal_patience_steps must be >= 1")
 
 
 _EXPLORING = ("frontier", "random", "explore")
@@ -112,6 +116,7 @@ class MapAgent:
         self._escape: list[Action] = []
         self._rejected: np.ndarray | None = None
         self._target_escapes = 0
+        self._progress: tuple[tuple[int, int] | None, float, int] = (None, math.inf, 0)  # goal, best m, steps
         self.stuck = False
 
     def change_target(self, goal: str) -> None:
@@ -172,9 +177,10 @@ class MapAgent:
 
         plan = self._plan(sem_map, goal, kind, last_move)
         retries = 0
-        while kind in _EXPLORING and (plan.reached or not plan.reachable) and retries < self.cfg.max_reselect:
-            # Reached (or found unreachable) an exploration goal: never come back to it, and pick
-            # the next one now rather than spending this step on a goal that is done.
+        while kind in _EXPLORING and (plan.reached or not plan.reachable or self._stalled(goal, plan)) \
+                and retries < self.cfg.max_reselect:
+            # Reached (or found unreachable, or no nearer for a while) an exploration goal: never come
+            # back to it, and pick the next one now rather than spending this step on a goal that is done.
             self._blocked.append(self._ltg)
             more_f, more_p = self._reselect(sem_map)
             frontiers_ms, policy_ms = frontiers_ms + more_f, policy_ms + more_p
@@ -237,6 +243,15 @@ class MapAgent:
         t1 = time.perf_counter()
         self._select(sem_map)
         return (t1 - t0) * 1e3, (time.perf_counter() - t1) * 1e3
+
+    def _stalled(self, goal: tuple[int, int], plan) -> bool:
+        """True once ``goal`` has gone ``goal_patience_steps`` steps without coming 0.5 m closer."""
+        last_goal, best, since = self._progress
+        if goal != last_goal or plan.distance_to_goal_m < best - 0.5:
+            self._progress = (goal, plan.distance_to_goal_m, 0)
+            return False
+        self._progress = (goal, best, since + 1)
+        return since + 1 >= self.cfg.goal_patience_steps
 
     def _plan(self, sem_map: SemanticMap, goal, kind: str, last_move: float | None):
         if kind == "target":

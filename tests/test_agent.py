@@ -160,6 +160,23 @@ def test_random_sample_keeps_its_goal_until_reached_while_frontier_policies_rese
     assert len(goals) >= 2 and max(legs) > agent.cfg.replan_every
 
 
+def test_an_exploration_goal_that_gets_no_nearer_is_given_up_after_the_patience(env):
+    from types import SimpleNamespace
+
+    agent = _agent(env, goal_patience_steps=5)
+    agent.reset(_episode())
+    goal = (10, 10)
+    # Circling: the path keeps changing and the distance wanders without a 0.5 m gain.
+    wander = [8.0, 8.3, 7.8, 8.1, 7.9]
+    assert not any(agent._stalled(goal, SimpleNamespace(distance_to_goal_m=d)) for d in wander)
+    assert agent._stalled(goal, SimpleNamespace(distance_to_goal_m=8.0))
+    # Real progress restarts the count, and so does a new goal.
+    assert not agent._stalled(goal, SimpleNamespace(distance_to_goal_m=7.0))
+    assert not agent._stalled((20, 20), SimpleNamespace(distance_to_goal_m=9.0))
+    with pytest.raises(L3MVNError, match="goal_patience_steps"):
+        AgentConfig(goal_patience_steps=0)
+
+
 
 def test_frontier_oracle_heads_for_the_frontier_nearest_the_goal_and_succeeds(env):
     from l3mvn.policies.oracle import FrontierOracle

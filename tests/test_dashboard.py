@@ -251,7 +251,7 @@ def test_a_manual_goal_becomes_the_long_term_goal_and_is_recorded_as_an_override
     d = ctl.events[-1].decision
     assert d.goal_kind == "manual" and d.long_term_goal == target
     assert d.override == f"manual:{target[0]},{target[1]}" and ctl.snapshot.manual_goal == target
-    with pytest.raises(L3MVNError, match="outside the 720x720 map"):
+    with pytest.raises(L3MVNError, match="outside the 960x960 map"):
         ctl.set_manual_goal((5000, -3))
     ctl.set_manual_goal(None)
     _steps(ctl, 1)

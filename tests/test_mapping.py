@@ -16,7 +16,7 @@ from l3mvn.sim.types import Pose
 H, W = 120, 160
 INTR = CameraIntrinsics.from_sim(SimConfig(), H, W)  # 79 deg HFOV, camera 0.88 m up
 CATS = ("chair", "couch", "tv")
-CENTRE = 360  # 36 m map at 5 cm
+CENTRE = 480  # 48 m map at 5 cm
 START = Pose(3.3, -1.2, 0.0)
 
 
@@ -66,7 +66,7 @@ def _outside_footprint(smap) -> np.ndarray:
 def test_start_pose_maps_to_map_centre_with_heading_kept():
     start = Pose(3.3, -1.2, 0.7)
     smap = _mapper(start=start).map
-    assert smap.size == 720
+    assert smap.size == 960
     assert smap.agent_cell == (CENTRE, CENTRE)
     assert smap.world_to_cell(3.3, -1.2) == (CENTRE, CENTRE)
     assert smap.cell_to_world(CENTRE, CENTRE) == pytest.approx((3.325, -1.175))
@@ -209,16 +209,16 @@ def test_visited_draws_a_continuous_line_between_poses():
 def test_pose_off_the_map_raises_and_leaves_the_map_untouched():
     mapper = _mapper()
     before = mapper.map.copy()
-    with pytest.raises(L3MVNError, match="off the 36 m map"):
-        mapper.update(_wall(2.02), None, Pose(START.x + 18.5, START.y, 0.0), 0.0)
+    with pytest.raises(L3MVNError, match="off the 48 m map"):
+        mapper.update(_wall(2.02), None, Pose(START.x + 24.5, START.y, 0.0), 0.0)
     after = mapper.map
     assert after.agent_cell == before.agent_cell
     assert np.array_equal(after.explored, before.explored) and np.array_equal(after.visited, before.visited)
 
 
 def test_world_to_cell_off_the_map_raises():
-    with pytest.raises(L3MVNError, match="off the 720x720 map"):
-        _mapper().map.world_to_cell(START.x, START.y - 18.1)
+    with pytest.raises(L3MVNError, match="off the 960x960 map"):
+        _mapper().map.world_to_cell(START.x, START.y - 24.1)
 
 
 def test_local_window_is_half_size_centred_on_the_agent_and_clamped_to_the_map():
@@ -234,8 +234,8 @@ def test_local_window_is_half_size_centred_on_the_agent_and_clamped_to_the_map()
 
 
 def test_map_sizes_follow_the_config():
-    assert MapConfig().map_cells == 720 and MapConfig().local_cells == 360
-    assert MapConfig(map_size_m=48.0).map_cells == 960
+    assert MapConfig().map_cells == 960 and MapConfig().local_cells == 480
+    assert MapConfig(map_size_m=36.0).map_cells == 720
 
 
 # --- bad inputs -------------------------------------------------------------------------------

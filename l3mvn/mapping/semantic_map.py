@@ -29,7 +29,8 @@ class MapConfig:
     """
 
     resolution_m: float = 0.05
-    map_size_m: float = 36.0
+    # 48 m: an agent 18 m from its start fell off a 36 m map in a 32 m wide Gibson house (Lindenwood).
+    map_size_m: float = 48.0
     local_map_divisor: int = 2
     obstacle_min_height_m: float = 0.25
     obstacle_above_camera_m: float = 0.5
@@ -103,7 +104,7 @@ class LocalWindow:
 class SemanticMap:
     """The map as the rest of the agent sees it. (M, M) / (K, M, M) bool grids, row = y, col = x.
 
-    The arrays are live views of the mapper's state (no per-step copy of a 720x720xK map): they change
+    The arrays are live views of the mapper's state (no per-step copy of a 960x960xK map): they change
     on the next ``update``; call ``copy()`` to keep a snapshot. ``start_xy`` is the world position of
     the map centre; ``agent_heading`` is in radians, counter-clockwise from +x.
     """

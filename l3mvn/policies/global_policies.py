@@ -64,15 +64,18 @@ class CostUtility:
 
 class RandomSample:
     """The paper's "random samples on map": a uniformly random cell of the local window that is
-    neither an obstacle nor explored yet (any non-obstacle cell once the window is all explored), so a
-    sample is a place worth going to rather than one already seen, and that the map does not wall off
-    from the agent."""
+    neither an obstacle nor explored yet, so a sample is a place worth going to rather than one
+    already seen; the map must not wall it off from the agent, and it must lie within ``band_m`` of
+    explored floor, where the floor evidently goes on (any such cell once none is left)."""
 
     name = "random-sample"
     # A sampled goal stands until reached or found unreachable: re-sampled every 10 steps (the
     # frontier policies' period) the agent walked 10-step legs in random directions, and 25 of its 35
     # failures on the dev houses ran out of steps with a median 62% of the floor mapped.
     keeps_goal = True
+    # Unknown cells deep beyond the explored floor are mostly outside the house (its outer wall not
+    # yet mapped): a goal there costs a walk to the wall. 1.5 m keeps the next room's worth of floor.
+    band_m = 1.5
 
     def select(self, frontiers, sem_map, goal, rng):
         win = sem_map.local_window()
@@ -82,10 +85,14 @@ class RandomSample:
         _, labels = cv2.connectedComponents((~win.obstacle).view(np.uint8), connectivity=8)
         own = labels[win.agent_cell]
         reachable = labels == own if own else ~win.obstacle  # (0: the agent stands on a mapped obstacle)
-        candidates = np.argwhere(reachable & ~win.explored)
-        if len(candidates) == 0:
-            candidates = np.argwhere(reachable)
-        r, c = candidates[rng.integers(len(candidates))]
+        unknown = reachable & ~win.explored
+        floor = (win.explored & ~win.obstacle).view(np.uint8)
+        near_floor = cv2.distanceTransform(1 - floor, cv2.DIST_L2, 3) <= self.band_m / sem_map.resolution_m
+        for candidates in (unknown & near_floor, unknown, reachable):
+            cells = np.argwhere(candidates)
+            if len(cells):
+                break
+        r, c = cells[rng.integers(len(cells))]
         cell = (int(r) + r0, int(c) + c0)
         return Selection(None, cell, np.zeros(len(frontiers)), f"random map cell {cell}")
 

@@ -70,6 +70,14 @@ class OraclePolicy:
         return float(self._field[r, c]) if self.env.scene.in_bounds(r, c) else math.inf
 
 
+def frontier_goal_distances(frontiers, sem_map, region) -> np.ndarray:
+    """Ground-truth geodesic from each frontier (its nearest cell) to the goal's success region, in
+    metres; inf where no cell of it lies on the ground-truth floor."""
+    return np.array([
+        region.distances_at(*sem_map.cell_to_world(f.cells[:, 0], f.cells[:, 1])).min() for f in frontiers
+    ], dtype=np.float64)
+
+
 class FrontierOracle:
     """Global policy: the frontier that minimises (travel cost to it + ground-truth geodesic distance
     from it to the goal's success region). Same agent, same frontiers, perfect prior."""
@@ -82,11 +90,8 @@ class FrontierOracle:
     def select(self, frontiers, sem_map, goal, rng):
         if not frontiers:
             return None
-        region = self.env.region(goal)
         cost = np.array([f.cost for f in frontiers], dtype=np.float64)
-        to_goal = np.array([
-            region.distances_at(*sem_map.cell_to_world(f.cells[:, 0], f.cells[:, 1])).min() for f in frontiers
-        ])
+        to_goal = frontier_goal_distances(frontiers, sem_map, self.env.region(goal))
         if not np.isfinite(to_goal).any():
             # Frontier cells off the ground-truth floor everywhere (early, in a narrow spot): say so.
             i = int(np.argmin(cost))
