@@ -52,6 +52,19 @@ def test_random_sample_skips_unexplored_cells_the_map_walls_off_from_the_agent()
     assert cells and all(18 <= r < 22 and 18 <= c < 25 for r, c in cells)
 
 
+def test_random_sample_prefers_unknown_cells_next_to_explored_floor():
+    # Explored floor in the west columns 0..9; unknown beyond. Cells more than 1.5 m (30 cells) from
+    # the floor are drawn only once none nearer is left.
+    explored = np.zeros((80, 80), bool)
+    explored[:, :10] = True
+    obstacle = np.zeros_like(explored)
+    sem_map, rng = _map(explored, obstacle), np.random.default_rng(7)
+    policy = RandomSample()
+    cells = [policy.select([], sem_map, "bed", rng).cell for _ in range(100)]
+    assert all(10 <= c <= 9 + policy.band_m / 0.05 for _, c in cells)
+    assert max(c for _, c in cells) > 30  # the whole band is drawn, not only its edge
+
+
 def test_options_a_policy_would_ignore_are_refused():
     with pytest.raises(L3MVNError, match="apply to language policies only"):
         check_options("frontier", PolicyOptions(scorer="roomtype"))

@@ -87,7 +87,8 @@ class RandomSample:
         reachable = labels == own if own else ~win.obstacle  # (0: the agent stands on a mapped obstacle)
         unknown = reachable & ~win.explored
         floor = (win.explored & ~win.obstacle).view(np.uint8)
-        near_floor = cv2.distanceTransform(1 - floor, cv2.DIST_L2, 3) <= self.band_m / sem_map.resolution_m
+        to_floor = cv2.distanceTransform(1 - floor, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        near_floor = to_floor <= self.band_m / sem_map.resolution_m
         for candidates in (unknown & near_floor, unknown, reachable):
             cells = np.argwhere(candidates)
             if len(cells):
