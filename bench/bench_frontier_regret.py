@@ -74,6 +74,7 @@ def _episode(args: tuple[str | None, str, int, str]) -> list[tuple[str, str, flo
         if not np.isfinite(total).any():
             continue
         best = total.min()
+        # A frontier off the ground-truth floor (seen through a gap) counts as the worst reachable one.
         total = np.where(np.isfinite(total), total, total[np.isfinite(total)].max())
         choices = {}
         for label, policy in candidates:

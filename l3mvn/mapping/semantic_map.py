@@ -154,9 +154,8 @@ class SemanticMap:
 
     def explored_at(self, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
         """Whether each world point (x, y) lies on an explored cell; points off the map are not."""
-        half = self.size // 2
-        rows = np.floor((np.asarray(ys) - self.start_xy[1]) / self.resolution_m).astype(np.int64) + half
-        cols = np.floor((np.asarray(xs) - self.start_xy[0]) / self.resolution_m).astype(np.int64) + half
+        rows, cols = _cells(np.asarray(xs) - self.start_xy[0], np.asarray(ys) - self.start_xy[1],
+                            self.resolution_m, self.size)
         ok = (rows >= 0) & (rows < self.size) & (cols >= 0) & (cols < self.size)
         out = np.zeros(rows.shape, dtype=bool)
         out[ok] = self.explored[rows[ok], cols[ok]]
@@ -366,9 +365,17 @@ class SemanticMapper:
         self._explored[rr, cc] = True
 
 
-def _cell(dx: float, dy: float, resolution_m: float, size: int) -> tuple[int, int]:
+def _cells(dx, dy, resolution_m: float, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of offsets (dx, dy) from the map centre, in metres; scalars or arrays."""
     half = size // 2
-    return int(math.floor(dy / resolution_m)) + half, int(math.floor(dx / resolution_m)) + half
+    rows = np.floor(np.asarray(dy) / resolution_m).astype(np.int64) + half
+    cols = np.floor(np.asarray(dx) / resolution_m).astype(np.int64) + half
+    return rows, cols
+
+
+def _cell(dx: float, dy: float, resolution_m: float, size: int) -> tuple[int, int]:
+    row, col = _cells(dx, dy, resolution_m, size)
+    return int(row), int(col)
 
 
 def _footprint_cells(cell: tuple[int, int], radius: int, size: int) -> tuple[np.ndarray, np.ndarray]:
