@@ -15,6 +15,7 @@ import pytest
 from l3mvn.agent import AgentConfig, MapAgent
 from l3mvn.config import SimConfig
 from l3mvn.errors import L3MVNError
+from l3mvn.mapping import SemanticMap
 from l3mvn.policies.global_policies import NearestFrontier
 from l3mvn.session import EpisodeSession
 from l3mvn.sim.simulator import BuiltinSimulator
@@ -176,6 +177,60 @@ def test_an_exploration_goal_that_gets_no_nearer_is_given_up_after_the_patience(
     with pytest.raises(L3MVNError, match="goal_patience_steps"):
         AgentConfig(goal_patience_steps=0)
 
+
+
+def _walled_target_map(agent_cell):
+    """Floor on both sides of a wall (cols 100-101) whose only door is 6 m south; a toilet 0.6 m
+    beyond the wall, level with the agent."""
+    n = 200
+    obstacle = np.zeros((n, n), bool)
+    obstacle[:170, 100:102] = True
+    target = np.zeros((n, n), bool)
+    target[48:53, 114:119] = True
+    explored = np.ones((n, n), bool)
+    sem_map = SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros_like(explored),
+                          categories=target[None], category_names=("toilet",), resolution_m=0.05,
+                          start_xy=(0.0, 0.0), agent_cell=agent_cell, agent_heading=0.0, local_cells=n,
+                          footprint_radius_cells=3)
+    return sem_map, target
+
+
+@pytest.mark.parametrize("rule", ["semexp", "geodesic"])
+def test_a_target_behind_a_wall_is_approached_as_the_success_rule_measures(rule):
+    agent = MapAgent(NearestFrontier(), ("toilet",), SimConfig(success_rule=rule), AgentConfig())
+    far = agent._plan(*_walled_target_map((50, 60)), "target", None)
+    beside_wall = agent._plan(*_walled_target_map((50, 97)), "target", None)
+    if rule == "semexp":
+        # Straight-line success: the floor on this side of the wall, within 0.9 m of the toilet.
+        assert far.reachable and far.distance_to_goal_m < 2.0 and far.short_term_goal[1] > 60
+        assert beside_wall.reached
+    else:
+        # Geodesic success: round through the door.
+        assert far.distance_to_goal_m > 10.0 and far.short_term_goal[0] > 50
+        assert not beside_wall.reached
+
+
+@pytest.mark.parametrize(("offset", "stuck", "stops"), [
+    ((5, 18), True, True),  # 0.93 m, no way closer: stop
+    ((5, 18), False, False),  # 0.93 m, a path closer: walk on
+    ((6, 19), True, False),  # 1.00 m: too far to count, stuck or not
+])
+def test_a_target_the_agent_cannot_get_closer_to_is_stopped_at_within_the_success_distance(env, offset, stuck, stops):
+    agent = _agent(env, look_around_steps=0)
+    episode = _episode("toilet")
+    obs = env.reset(episode)
+    agent.reset(episode)
+    agent.act(obs)
+    row, col = agent._mapper.map.agent_cell
+    toilet = agent._mapper.map.category("toilet")
+    toilet[row + offset[0]:row + offset[0] + 2, col + offset[1]:col + offset[1] + 2] = True
+    plan = agent.planner.plan
+    agent.planner.plan = lambda *a, **k: dataclasses.replace(plan(*a, **k), stuck=stuck)
+    d = agent.act(obs)
+    assert d.goal_kind == "target"
+    assert (d.action == Action.STOP) == stops, d.reason
+    if stops:
+        assert "no path closer" in d.reason
 
 
 def test_frontier_oracle_heads_for_the_frontier_nearest_the_goal_and_succeeds(env):

@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from l3mvn.frontiers import Frontier
+from l3mvn.planning.fmm import distance_field
 
 
 @dataclass
@@ -86,9 +87,10 @@ class RandomSample:
         own = labels[win.agent_cell]
         reachable = labels == own if own else ~win.obstacle  # (0: the agent stands on a mapped obstacle)
         unknown = reachable & ~win.explored
-        floor = (win.explored & ~win.obstacle).view(np.uint8)
-        to_floor = cv2.distanceTransform(1 - floor, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-        near_floor = to_floor <= self.band_m / sem_map.resolution_m
+        # Measured around mapped walls, not through them: the unknown just behind an outer wall is
+        # near the floor in a straight line, yet reached only by walking around the house.
+        near_floor = np.isfinite(distance_field(~win.obstacle, win.explored & ~win.obstacle,
+                                                resolution_m=sem_map.resolution_m, limit_m=self.band_m))
         for candidates in (unknown & near_floor, unknown, reachable):
             cells = np.argwhere(candidates)
             if len(cells):
