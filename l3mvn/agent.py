@@ -391,10 +391,10 @@ def _straight_m(sem_map: SemanticMap, mask: np.ndarray) -> float:
 
 def _within(mask: np.ndarray, radius_cells: float) -> np.ndarray:
     """Cells whose centre lies within ``radius_cells`` (straight line) of a cell of ``mask``."""
-    rows, cols = np.nonzero(mask)
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
     pad = int(math.ceil(radius_cells)) + 1
-    r0, c0 = max(rows.min() - pad, 0), max(cols.min() - pad, 0)
-    r1, c1 = min(rows.max() + pad + 1, mask.shape[0]), min(cols.max() + pad + 1, mask.shape[1])
+    r0, c0 = max(rows[0] - pad, 0), max(cols[0] - pad, 0)
+    r1, c1 = min(rows[-1] + pad + 1, mask.shape[0]), min(cols[-1] + pad + 1, mask.shape[1])
     outside = (~mask[r0:r1, c0:c1]).view(np.uint8)
     near = cv2.distanceTransform(outside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= radius_cells
     out = np.zeros_like(mask)
