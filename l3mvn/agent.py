@@ -87,6 +87,9 @@ class MapAgent:
     def __init__(self, global_policy: GlobalPolicy, categories: tuple[str, ...], sim: SimConfig,
                  cfg: AgentConfig | None = None, seed: int = 0) -> None:
         self.cfg = cfg or AgentConfig()
+        if self.cfg.blocked_stop_distance_m >= sim.success_distance_m:
+            raise L3MVNError(f"blocked_stop_distance_m ({self.cfg.blocked_stop_distance_m} m) must be below the "
+                             f"success distance ({sim.success_distance_m} m): a stop there never succeeds")
         self.global_policy = global_policy
         self.categories = categories
         self.sim = sim

@@ -178,7 +178,6 @@ def test_an_exploration_goal_that_gets_no_nearer_is_given_up_after_the_patience(
         AgentConfig(goal_patience_steps=0)
 
 
-
 def _walled_target_map(agent_cell):
     """Floor on both sides of a wall (cols 100-101) whose only door is 6 m south; a toilet 0.6 m
     beyond the wall, level with the agent."""
@@ -231,6 +230,13 @@ def test_a_target_the_agent_cannot_get_closer_to_is_stopped_at_within_the_succes
     assert (d.action == Action.STOP) == stops, d.reason
     if stops:
         assert "no path closer" in d.reason
+
+
+def test_stop_distances_are_checked_against_each_other_and_the_success_distance(env):
+    with pytest.raises(L3MVNError, match="stop_distance_m <= blocked_stop_distance_m"):
+        AgentConfig(stop_distance_m=0.95, blocked_stop_distance_m=0.9)
+    with pytest.raises(L3MVNError, match="below the success distance"):
+        MapAgent(NearestFrontier(), env.categories, env.cfg, AgentConfig(blocked_stop_distance_m=1.0))
 
 
 def test_frontier_oracle_heads_for_the_frontier_nearest_the_goal_and_succeeds(env):
