@@ -156,7 +156,8 @@ class EpisodeSession:
 
     def _coverage(self) -> float | None:
         """Ground truth for the failure analysis: the share of the floor reachable from the start
-        that the agent's own map marks explored (None when the policy keeps no map)."""
+        that the agent's own map marks explored. None when the policy keeps no map or the backend
+        has no ground-truth floor to measure against (``reachable_cells``, built-in simulator only)."""
         decision = self.last_event.decision if self.last_event is not None else None
         sem_map = decision.map if decision is not None else None
         reachable = getattr(self.env, "reachable_cells", None)
