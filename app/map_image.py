@@ -18,6 +18,7 @@ from l3mvn.viz import category_palette, legend
 
 UNEXPLORED = (28, 30, 36)
 FREE = (226, 226, 220)
+GLIMPSED = (170, 170, 160)  # explored only from afar (SemanticMap.looked): what the agent may go look at
 OBSTACLE = (112, 112, 124)
 TRAJECTORY = (10, 10, 10)
 MARGIN_CELLS = 24
@@ -34,6 +35,7 @@ def agent_map_view(decision: Decision) -> MapView:
     img = np.empty((r1 - r0, c1 - c0, 3), np.uint8)
     img[:] = UNEXPLORED
     img[m.explored[rows, cols]] = FREE
+    img[m.explored[rows, cols] & ~m.looked[rows, cols]] = GLIMPSED
     img[m.obstacle[rows, cols]] = OBSTACLE
     _paint_categories(img, m.categories[:, rows, cols], m.category_names)
     img[m.visited[rows, cols]] = TRAJECTORY

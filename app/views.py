@@ -462,9 +462,10 @@ def _recordings_markdown(record_dir, limit: int = 8) -> str:
 
 
 def _legend_html(view: MapView) -> str:
-    from app.map_image import FREE, OBSTACLE, TRAJECTORY, UNEXPLORED
+    from app.map_image import FREE, GLIMPSED, OBSTACLE, TRAJECTORY, UNEXPLORED
 
-    fixed = [("unexplored", UNEXPLORED), ("free", FREE), ("obstacle", OBSTACLE), ("trajectory", TRAJECTORY)]
+    fixed = [("unexplored", UNEXPLORED), ("free", FREE), ("seen from afar", GLIMPSED), ("obstacle", OBSTACLE),
+             ("trajectory", TRAJECTORY)]
     items = "".join(
         f'<span style="display:inline-block;margin:2px 8px 2px 0;font-size:12px">'
         f'<span style="display:inline-block;width:11px;height:11px;border:1px solid #888;'

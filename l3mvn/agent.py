@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import time
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -67,6 +67,26 @@ class AgentConfig:
     # an unreachable one: a path through unknown space that keeps meeting new walls stays "reachable"
     # while the agent circles (random-sample kept such goals for 480 steps on the dev houses).
     goal_patience_steps: int = 40
+    # Reaching a goal is not seeing it: an exploration goal or a glimpsed target counts as looked at
+    # only once it lies within this angle of the view's centre (the 79-degree view's half is 39.5).
+    # Gibson toilets were missed this way: the frontier at a bathroom door read as reached from
+    # 0.75 m beside it, was blocked, and the room behind it was never looked into.
+    look_tolerance_deg: float = 30.0
+    # ... and a frontier that still borders unknown space once faced is walked up to this close.
+    frontier_press_m: float = 0.3
+    # With no frontier left, areas explored only from afar (the floor of a room seen through its
+    # door) at least this large are visited before wandering at random (MapConfig.look_distance_m).
+    look_min_area_m2: float = 0.25
+    # A glimpsed target that stays under target_min_cells once approached and faced is looked at
+    # from this many other poses, this far from it (valid depth starts at 0.5 m), before set aside.
+    candidate_views: int = 2
+    viewpoint_min_m: float = 1.2
+    viewpoint_max_m: float = 1.8
+    # The goal filling this share of the (mapped) frame beyond the depth range (no depth, so no map
+    # cells) is a sighting worth walking towards: a tv 6 m down a corridor showed 120 pixels for two
+    # steps and the agent turned away for good (Tolstoy). Larger blobs without depth are too near.
+    glimpse_min_fraction: float = 0.001
+    glimpse_max_fraction: float = 0.05
     seg_noise: float = 0.0
 
     def __post_init__(self) -> None:
@@ -76,9 +96,20 @@ class AgentConfig:
             raise L3MVNError("replan_every, target_min_cells and goal_patience_steps must be >= 1")
         if not 0 < self.stop_distance_m <= self.blocked_stop_distance_m:
             raise L3MVNError("stop distances must satisfy 0 < stop_distance_m <= blocked_stop_distance_m")
+        if not 15.0 <= self.look_tolerance_deg < 90.0:
+            # Below half a 30-degree turn the agent could turn past the goal and back forever.
+            raise L3MVNError(f"look_tolerance_deg must lie in [15, 90), got {self.look_tolerance_deg}")
+        if self.candidate_views < 0 or self.look_min_area_m2 < 0:
+            raise L3MVNError("candidate_views and look_min_area_m2 must be >= 0")
+        if not 0 < self.frontier_press_m < self.frontier_reached_m:
+            raise L3MVNError("frontier_press_m must satisfy 0 < frontier_press_m < frontier_reached_m")
+        if not 0 < self.glimpse_min_fraction < self.glimpse_max_fraction <= 1:
+            raise L3MVNError("glimpse fractions must satisfy 0 < glimpse_min_fraction < glimpse_max_fraction <= 1")
+        if not 0 < self.viewpoint_min_m < self.viewpoint_max_m:
+            raise L3MVNError("viewpoint distances must satisfy 0 < viewpoint_min_m < viewpoint_max_m")
 
 
-_EXPLORING = ("frontier", "random", "explore")
+_EXPLORING = ("frontier", "random", "explore", "look")
 
 
 class MapAgent:
@@ -124,6 +155,11 @@ class MapAgent:
         self._escape: list[Action] = []
         self._rejected: np.ndarray | None = None
         self._target_escapes = 0
+        self._viewpoint: tuple[int, int] | None = None
+        self._pressing: tuple[int, int] | None = None  # frontier goal walked up to (frontier_press_m)
+        self._views: list[float] = []  # bearings (from the glimpsed target) it was looked at from
+        self._glimpse: tuple[int, int] | None = None  # where a sighting beyond the depth range points
+        self._frame: tuple[np.ndarray, np.ndarray] | None = None  # the last mapped depth and labels
         self._progress: tuple[tuple[int, int] | None, float, int] = (None, math.inf, 0)  # goal, best m, steps
         self.stuck = False
 
@@ -163,6 +199,12 @@ class MapAgent:
             return self._decide(obs, self._escape.pop(), sem_map, self._ltg, "escape",
                                 "escaping: cleared collision marks, random turn then forward", t, None, None)
         target, confirmed = self._target_mask(sem_map)
+        if target is None or confirmed:  # nothing glimpsed, or confirmed: no other views needed
+            self._viewpoint, self._views = None, []
+        if target is None:
+            self._glimpse = self._far_sighting(sem_map) or self._glimpse
+        else:
+            self._glimpse = None
         override = None
         frontiers_ms = policy_ms = 0.0
         if self._manual is not None:
@@ -170,6 +212,10 @@ class MapAgent:
             override = f"manual:{self._manual[0]},{self._manual[1]}"
         elif target is not None and confirmed:
             goal, kind, reason = target, "target", f"{self.goal} seen: heading to it"
+        elif target is not None and self._viewpoint is not None:
+            goal, kind = self._viewpoint, "viewpoint"
+            reason = (f"{int(target.sum())} {self.goal} cell(s) seen, still too few up close: looking from "
+                      f"another side ({len(self._views)} of {self.cfg.candidate_views})")
         elif target is not None:
             goal, kind = target, "candidate"
             reason = f"{int(target.sum())} {self.goal} cell(s) seen: too few to stop, going closer to confirm"
@@ -177,6 +223,9 @@ class MapAgent:
             self._steps += 1
             return self._decide(obs, Action.TURN_LEFT, sem_map, None, "look-around",
                                 "initial 360-degree look", t, None, None)
+        elif self._glimpse is not None:
+            goal, kind = self._glimpse, "glimpse"
+            reason = f"{self.goal} seen beyond the depth range: walking towards it"
         else:
             if self._reselect_due():
                 frontiers_ms, policy_ms = self._reselect(sem_map)
@@ -184,6 +233,16 @@ class MapAgent:
         t["select"] = time.perf_counter()
 
         plan = self._plan(sem_map, goal, kind, last_move)
+        if kind == "glimpse" and (plan.reached or not plan.reachable or self._stalled(goal, plan)):
+            # There, and the target still maps to nothing (or no way there): explore on.
+            self._blocked.append(goal)
+            self._glimpse = None
+            more_f, more_p = self._reselect(sem_map)
+            frontiers_ms, policy_ms = frontiers_ms + more_f, policy_ms + more_p
+            goal, kind, reason = self._ltg, self._ltg_kind, self._ltg_reason
+            plan = self._plan(sem_map, goal, kind, None)
+        if kind in _EXPLORING and plan.reached:
+            plan, reason = self._finish_looking(sem_map, goal, kind, plan, reason, last_move)
         retries = 0
         while kind in _EXPLORING and (plan.reached or not plan.reachable or self._stalled(goal, plan)) \
                 and retries < self.cfg.max_reselect:
@@ -195,6 +254,26 @@ class MapAgent:
             goal, kind, reason = self._ltg, self._ltg_kind, self._ltg_reason
             plan = self._plan(sem_map, goal, kind, None)
             retries += 1
+        if kind == "viewpoint" and (plan.reached or not plan.reachable or self._stalled(goal, plan)):
+            # At the other pose (or it cannot be reached): face the sighting, then approach it again.
+            turn = self._look_turn(sem_map, _centre(target))
+            if turn is None or not plan.reachable:
+                self._viewpoint = None
+                goal, kind = target, "candidate"
+                plan = self._plan(sem_map, goal, kind, None)
+            else:
+                plan = replace(plan, action=turn, reached=False)
+        elif kind == "candidate" and plan.reached:
+            turn = self._look_turn(sem_map, _centre(target))
+            if turn is not None:
+                plan = replace(plan, action=turn, reached=False)
+                reason = f"{reason}; turning to look at it"
+            elif len(self._views) < self.cfg.candidate_views \
+                    and (view := self._pick_viewpoint(sem_map, target)) is not None:
+                self._viewpoint = view
+                goal, kind = view, "viewpoint"
+                reason = f"{int(target.sum())} {self.goal} cell(s) still too few up close: looking from another side"
+                plan = self._plan(sem_map, goal, kind, None)
         t["planning"] = time.perf_counter()
         self.stuck = plan.stuck
         action = plan.action
@@ -212,6 +291,7 @@ class MapAgent:
         ):
             self._rejected |= goal
             self._unreachable, self._target_escapes, self._since_select = 0, 0, math.inf
+            self._viewpoint, self._views = None, []
             reason = f"{self.goal} cells unreachable: set aside, exploring on"
         elif self._unreachable >= self.cfg.escape_after_unreachable or plan.stuck:
             if kind == "target" and not plan.reachable:
@@ -221,9 +301,10 @@ class MapAgent:
             self._start_escape()
             action, reason = self._escape.pop(), "goal unreachable or stuck: clearing collision marks, escaping"
         elif plan.reached and kind == "candidate":
-            # Close enough to see it well, and it never grew into a target: mapping noise.
+            # Seen up close, faced and from other sides, and it never grew into a target: mapping noise.
             self._rejected |= target
-            self._since_select = math.inf
+            reason = f"{self.goal} cells never grew into a target from {len(self._views) + 1} views: set aside"
+            self._since_select, self._views = math.inf, []
         elif plan.reached and kind == "manual":
             self._manual = None
             self._since_select = math.inf
@@ -236,16 +317,23 @@ class MapAgent:
     # --- pieces ------------------------------------------------------------------------------
     def _reselect_due(self) -> bool:
         """Every ``replan_every`` steps, at once when forced (inf), never while a policy that keeps
-        its goal (random sample) still pursues one."""
+        its goal (random sample) still pursues one or while walking up to a frontier."""
         if self._ltg is None or self._since_select == math.inf:
             return True
         keeps = self._ltg_kind == "random" and getattr(self.global_policy, "keeps_goal", False)
+        keeps = keeps or (self._ltg_kind == "frontier" and self._ltg == self._pressing)  # nearly there
         return self._since_select >= self.cfg.replan_every and not keeps
 
     def _reselect(self, sem_map: SemanticMap) -> tuple[float, float]:
-        """Extract frontiers and let the global policy choose; returns (frontier ms, policy ms)."""
+        """Extract frontiers and let the global policy choose; returns (frontier ms, policy ms).
+        With no frontier left, look at what was only seen from afar before revisiting old goals."""
         t0 = time.perf_counter()
         self._frontiers = self._extract(sem_map)
+        if not self._frontiers and (look := self._look_goal(sem_map)) is not None:
+            self._since_select = 0
+            self._ltg, self._ltg_kind, self._ltg_frontier = look, "look", None
+            self._ltg_reason = "no frontier left: looking at floor seen only from afar"
+            return (time.perf_counter() - t0) * 1e3, 0.0
         if not self._frontiers and self._blocked:
             # Every frontier left was reached once and is still there (the camera could not clear
             # it from where the agent stood): visiting them again beats wandering at random.
@@ -276,9 +364,92 @@ class MapAgent:
             radius, dilation = self.cfg.candidate_reached_m, None
         else:
             radius, dilation = self.cfg.frontier_reached_m, self.cfg.explore_goal_dilation_m
+            if kind == "frontier" and goal == self._pressing:
+                radius = self.cfg.frontier_press_m
         return self.planner.plan(sem_map.obstacle, sem_map.agent_cell, sem_map.agent_heading, goal,
                                  last_move_m=last_move, goal_reached_radius_m=radius,
                                  goal_dilation_m=dilation)
+
+    def _finish_looking(self, sem_map: SemanticMap, goal: tuple[int, int], kind: str, plan, reason: str,
+                        last_move: float | None):
+        """An exploration goal reached within its radius is done only once the agent has looked into
+        the unknown beyond it: face that unknown first, and if a frontier goal still borders it,
+        walk on to the frontier itself (``frontier_press_m``). On the Gibson dev houses the door of
+        a bathroom read as reached from 0.75 m beside it, its frontier was blocked for good, and
+        the toilet behind was never seen (Stockman)."""
+        # The unknown the goal borders, within half the radius a done goal blocks.
+        beyond = _unknown_near(sem_map, goal, self.cfg.blocked_radius_m / sem_map.resolution_m / 2)
+        turn = self._look_turn(sem_map, goal if beyond is None else beyond)
+        if turn is not None:
+            return replace(plan, action=turn, reached=False), f"{reason}; turning to look at it"
+        if kind == "frontier" and beyond is not None and self._pressing != goal:
+            self._pressing = goal
+            pressed = self._plan(sem_map, goal, kind, last_move)
+            if pressed.reachable and not pressed.reached:
+                return pressed, f"{reason}; still unknown beyond it: walking up to it"
+        return plan, reason
+
+    def _look_turn(self, sem_map: SemanticMap, cell: tuple[int, int]) -> Action | None:
+        """The turn towards ``cell``, or None when it already lies within the look tolerance."""
+        r, c = sem_map.agent_cell
+        if (r, c) == tuple(cell):
+            return None
+        off = (math.atan2(cell[0] - r, cell[1] - c) - sem_map.agent_heading + math.pi) % (2 * math.pi) - math.pi
+        if abs(off) <= math.radians(self.cfg.look_tolerance_deg):
+            return None
+        return Action.TURN_LEFT if off > 0 else Action.TURN_RIGHT
+
+    def _pick_viewpoint(self, sem_map: SemanticMap, target: np.ndarray) -> tuple[int, int] | None:
+        """A reachable cell ``viewpoint_min_m``-``viewpoint_max_m`` from the glimpsed target, seen from
+        the side most unlike the views so far (a slit or a depth gap rarely repeats from there)."""
+        res = sem_map.resolution_m
+        centre = np.array(_centre(target))
+        d = _distance_to(target, self.cfg.viewpoint_max_m / res + 1)
+        ring = (d >= self.cfg.viewpoint_min_m / res) & (d <= self.cfg.viewpoint_max_m / res) & sem_map.explored
+        if not ring.any():
+            return None
+        field_ = self.planner.distance_from_agent(sem_map.obstacle, sem_map.agent_cell, targets=ring).full()
+        cells = np.argwhere(ring & np.isfinite(field_))
+        if len(cells) == 0:
+            return None
+        agent = np.array(sem_map.agent_cell)
+        self._views.append(math.atan2(*(agent - centre)))  # the view from here, as atan2(dr, dc)
+        bearings = np.arctan2(cells[:, 0] - centre[0], cells[:, 1] - centre[1])
+        seen = np.array(self._views)
+        gap = np.abs((bearings[:, None] - seen[None, :] + np.pi) % (2 * np.pi) - np.pi).min(axis=1)
+        best = np.lexsort((field_[cells[:, 0], cells[:, 1]], -np.round(gap, 1)))[0]
+        return int(cells[best, 0]), int(cells[best, 1])
+
+    def _look_goal(self, sem_map: SemanticMap) -> tuple[int, int] | None:
+        """The nearest reachable cell of the areas explored only from afar (each at least
+        ``look_min_area_m2``, away from goals already done), or None."""
+        glimpsed = sem_map.explored & ~sem_map.looked & ~sem_map.obstacle
+        rows, cols = np.flatnonzero(glimpsed.any(axis=1)), np.flatnonzero(glimpsed.any(axis=0))
+        if len(rows) == 0:
+            return None
+        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        crop = glimpsed[r0:r1, c0:c1].astype(np.uint8)
+        _, labels, stats, _ = cv2.connectedComponentsWithStats(crop, connectivity=8)
+        big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] * sem_map.resolution_m**2 >= self.cfg.look_min_area_m2)
+        big = big[big > 0]
+        if len(big) == 0:
+            return None
+        areas = np.zeros_like(glimpsed)
+        areas[r0:r1, c0:c1] = np.isin(labels, big)
+        if self._blocked:
+            done = np.zeros(areas.shape, np.uint8)
+            for br, bc in self._blocked:
+                cv2.circle(done, (int(bc), int(br)), int(self.cfg.blocked_radius_m / sem_map.resolution_m), 1, -1)
+            areas &= done == 0
+            if not areas.any():
+                return None
+        field_ = self.planner.distance_from_agent(sem_map.obstacle, sem_map.agent_cell, targets=areas).full()
+        field_ = np.where(areas, field_, np.inf)
+        best = int(np.argmin(field_))
+        if not np.isfinite(field_.flat[best]):
+            return None
+        r, c = np.unravel_index(best, field_.shape)
+        return int(r), int(c)
 
     def _start_escape(self) -> None:
         self.planner.clear_collisions()
@@ -298,7 +469,32 @@ class MapAgent:
             self._mapper = SemanticMapper(self.cfg.map, intr, self.categories)
             self._mapper.reset(self._start)
             self._frame_shape = depth.shape
+        self._frame = (depth, semantic)
         return self._mapper.update(depth, semantic, obs.pose, obs.tilt)
+
+    def _far_sighting(self, sem_map: SemanticMap) -> tuple[int, int] | None:
+        """The map cell at the depth range along the bearing of goal pixels that have no depth (seen
+        beyond the range), when they fill between the glimpse fractions of the frame and do not
+        point at a goal already done; else None."""
+        depth, semantic = self._frame
+        if self.goal not in self.categories:
+            return None
+        far = (semantic == self.categories.index(self.goal) + 1) & (depth <= 0)
+        share = np.count_nonzero(far) / far.size
+        if not self.cfg.glimpse_min_fraction <= share <= self.cfg.glimpse_max_fraction:
+            return None
+        width = far.shape[1]
+        focal = (width / 2.0) / math.tan(math.radians(self.sim.hfov_deg) / 2.0)
+        column = float(np.nonzero(far)[1].mean()) + 0.5
+        bearing = sem_map.agent_heading - math.atan((column - width / 2.0) / focal)  # right is clockwise
+        reach = self.cfg.map.max_depth_m / sem_map.resolution_m
+        r = int(round(sem_map.agent_cell[0] + reach * math.sin(bearing)))
+        c = int(round(sem_map.agent_cell[1] + reach * math.cos(bearing)))
+        r, c = min(max(r, 0), sem_map.size - 1), min(max(c, 0), sem_map.size - 1)
+        radius = self.cfg.blocked_radius_m / sem_map.resolution_m
+        if any(math.hypot(r - br, c - bc) <= radius for br, bc in self._blocked):
+            return None
+        return r, c
 
     def _target_mask(self, sem_map: SemanticMap) -> tuple[np.ndarray | None, bool]:
         """The largest connected blob of the goal channel (rejected cells aside) and whether it has
@@ -394,14 +590,29 @@ def _straight_m(sem_map: SemanticMap, mask: np.ndarray) -> float:
 
 def _within(mask: np.ndarray, radius_cells: float) -> np.ndarray:
     """Cells whose centre lies within ``radius_cells`` (straight line) of a cell of ``mask``."""
+    return _distance_to(mask, radius_cells) <= radius_cells
+
+
+def _unknown_near(sem_map: SemanticMap, cell: tuple[int, int], radius_cells: float) -> tuple[int, int] | None:
+    """Centroid of the unexplored cells within ``radius_cells`` of ``cell``, or None."""
+    r, c, k = int(cell[0]), int(cell[1]), int(math.ceil(radius_cells))
+    r0, c0 = max(r - k, 0), max(c - k, 0)
+    win = ~sem_map.explored[r0 : r + k + 1, c0 : c + k + 1]
+    rows, cols = np.nonzero(win)
+    near = (rows + r0 - r) ** 2 + (cols + c0 - c) ** 2 <= radius_cells**2
+    if not near.any():
+        return None
+    return int(round(rows[near].mean())) + r0, int(round(cols[near].mean())) + c0
+
+
+def _distance_to(mask: np.ndarray, limit_cells: float) -> np.ndarray:
+    """Straight-line distance (cells) to the nearest cell of ``mask``, inf beyond ``limit_cells``."""
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-    pad = int(math.ceil(radius_cells)) + 1
+    pad = int(math.ceil(limit_cells)) + 1
     r0, c0 = max(rows[0] - pad, 0), max(cols[0] - pad, 0)
     r1, c1 = min(rows[-1] + pad + 1, mask.shape[0]), min(cols[-1] + pad + 1, mask.shape[1])
-    outside = (~mask[r0:r1, c0:c1]).view(np.uint8)
-    near = cv2.distanceTransform(outside, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= radius_cells
-    out = np.zeros_like(mask)
-    out[r0:r1, c0:c1] = near
+    out = np.full(mask.shape, np.inf, dtype=np.float32)
+    out[r0:r1, c0:c1] = cv2.distanceTransform((~mask[r0:r1, c0:c1]).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     return out
 
 

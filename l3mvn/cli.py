@@ -87,8 +87,20 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--record", action="store_true", help="write a rerun recording per episode to --record-dir")
     ev.add_argument("--record-dir", default="recordings", help="where --record writes (default recordings/)")
 
-    sc = sub.add_parser("scenes", help="list the scenes and floors of a dataset split")
+    sc = sub.add_parser("scenes", help="list the scenes and floors of a dataset split, or audit them")
+    sc.add_argument("action", nargs="?", choices=["list", "audit"], default="list",
+                    help="list (default), or audit: can every goal object be confirmed from its success region")
     _add_source_args(sc)
+    sc.add_argument("--rule", choices=["semexp", "geodesic"], default="semexp", help="audit: success rule")
+    sc.add_argument("--frame", default=None, metavar="HxW", help="audit: render size (default 480x640)")
+    sc.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="audit: override a SimConfig field")
+    sc.add_argument("--scene", default=None, help="audit: only this scene")
+    sc.add_argument("--workers", type=_positive, default=2, help="audit: floors audited in parallel (default 2)")
+    sc.add_argument("--json", action="store_true", help="audit: print the JSON report instead of the table")
+    sc.add_argument("--out", default=None,
+                    help="audit: write audit.json and a diagnostic PNG per failing instance here")
+    sc.add_argument("--all-pngs", action="store_true", help="audit: a PNG for every instance, not only failing ones")
 
     epi = sub.add_parser("episodes", help="episode files")
     epi_sub = epi.add_subparsers(dest="episodes_command", required=True)
@@ -137,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "eval":
             return _cmd_eval(args)
         if args.command == "scenes":
-            return _cmd_scenes(args)
+            return _cmd_audit(args) if args.action == "audit" else _cmd_scenes(args)
         if args.command == "episodes":
             return _cmd_generate(args)
         if args.command == "render":
@@ -174,6 +186,11 @@ def _scenes(args: argparse.Namespace):
 
 
 def _cmd_scenes(args: argparse.Namespace) -> int:
+    given = [flag for flag, value in (("--scene", args.scene), ("--frame", args.frame), ("--out", args.out),
+                                      ("--json", args.json), ("--all-pngs", args.all_pngs), ("--set", args.set))
+             if value]
+    if given:
+        raise L3MVNError(f"{', '.join(given)}: only for 'l3mvn scenes audit'")
     source, scenes = _scenes(args)
     print(f"{source} / {args.split if args.dataset else '-'}: {len(scenes)} scenes")
     print(f"{'scene':<22}{'floor':>6}{'size (m)':>14}{'navigable m2':>14}  goals present")
@@ -184,6 +201,49 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
             area = s.navigable.sum() * s.resolution_m**2
             print(f"{name:<22}{floor:>6}{size:>14}{area:>14.1f}  {', '.join(s.present_goals())}")
     return 0
+
+
+def _cmd_audit(args: argparse.Namespace) -> int:
+    from l3mvn.eval.audit import audit_scenes, downsample_factor, format_report, load_split_for_audit
+
+    cfg = SimConfig(success_rule=args.rule)
+    if args.frame is not None:
+        try:
+            cfg = cfg.with_frame(*_frame(args.frame))
+        except argparse.ArgumentTypeError as exc:
+            raise L3MVNError(f"--frame: {exc}") from None
+    cfg = override(cfg, args.set)
+    downsample_factor(cfg)
+    if args.dataset is None:
+        source, split, episodes = "procedural", "-", []
+        _, scenes = _scenes(args)
+        if args.scene is not None:
+            if args.scene not in scenes:
+                raise L3MVNError(f"unknown scene {args.scene!r}; available: {', '.join(sorted(scenes))}")
+            scenes = {args.scene: scenes[args.scene]}
+    else:
+        source, split = args.dataset, args.split
+        scenes, episodes = load_split_for_audit(args.dataset, args.split, args.scene)
+    with _progress_floors(sum(len(f) for f in scenes.values())) as bar:
+        def progress(floor) -> None:
+            bar.update(1)
+            bar.set_postfix_str(floor.key)
+
+        report = audit_scenes(scenes, cfg, episodes, workers=args.workers, out_dir=args.out,
+                              all_pngs=args.all_pngs, source=source, split=split, progress=progress)
+    data = report.to_json()
+    if args.out:
+        path = Path(args.out) / "audit.json"
+        path.write_text(json.dumps(data, indent=1))
+        print(f"wrote {path}", file=sys.stderr)
+    print(json.dumps(data) if args.json else format_report(report))
+    return 0
+
+
+def _progress_floors(total: int):
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="floor", file=sys.stderr, dynamic_ncols=True, mininterval=1.0)
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:

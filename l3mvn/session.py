@@ -50,6 +50,7 @@ class EpisodeSession:
         self.policy.reset(episode)
         self._obs = obs
         self._saw = target_visible(obs)
+        self._confirmed = False
         self._entered = self.env.in_success_region()
         self._forwards: deque[bool] = deque(maxlen=COLLISION_WINDOW)
         return self._publish(obs, None, None)
@@ -69,6 +70,7 @@ class EpisodeSession:
         if decision.action == Action.MOVE_FORWARD:
             self._forwards.append(obs.collided)
         self._saw = self._saw or target_visible(obs)
+        self._confirmed = self._confirmed or decision.target_seen
         self._entered = self._entered or self.env.in_success_region()
         self._obs = obs
         if self.env.done:
@@ -102,6 +104,7 @@ class EpisodeSession:
             self.policy.change_target(goal)
         self._obs = replace(self._obs, goal=goal)
         self._saw = target_visible(self._obs)
+        self._confirmed = False
         self._entered = self.env.in_success_region()
         return self._publish(self._obs, None, None)
 
@@ -151,7 +154,10 @@ class EpisodeSession:
     def _extra(self, outcome: EpisodeOutcome) -> dict:
         extra: dict = {"segments": self.segment + 1} if self.segment else {}
         if outcome.coverage is not None:
+            # Map-based agents: whether the map ever confirmed the target (>= target_min_cells), which
+            # tells a target glimpsed but never confirmed from one confirmed but not reached.
             extra["coverage"] = round(outcome.coverage, 3)
+            extra["confirmed"] = self._confirmed
         return extra
 
     def _coverage(self) -> float | None:

@@ -12,7 +12,7 @@ import pytest
 def _map(explored: np.ndarray, obstacle: np.ndarray) -> SemanticMap:
     n = explored.shape[0]
     return SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros_like(explored),
-                       categories=np.zeros((0, n, n), bool), category_names=(), resolution_m=0.05,
+                       categories=np.zeros((0, n, n), bool), category_names=(), looked=explored, resolution_m=0.05,
                        start_xy=(0.0, 0.0), agent_cell=(n // 2, n // 2), agent_heading=0.0,
                        local_cells=n, footprint_radius_cells=3)
 

@@ -149,6 +149,19 @@ def test_free_space_between_camera_and_wall_is_explored_but_not_beyond_it():
     assert not blind.explored[CENTRE, CENTRE + 10 : CENTRE + 25].all()
 
 
+def test_only_what_was_seen_from_within_the_look_distance_counts_as_looked_at():
+    # A wall 4.5 m ahead: the floor and the wall are explored all the way, looked at up to 2.5 m.
+    smap = _mapper().update(_wall(4.5), None, START, 0.0)
+    cols = CENTRE + np.arange(12, 88)  # 0.6-4.4 m ahead
+    row = CENTRE
+    assert smap.explored[row, cols].all()
+    near = (cols - CENTRE + 0.5) * 0.05 <= MapConfig().look_distance_m
+    assert smap.looked[row, cols[near]].all() and not smap.looked[row, cols[~near]].any()
+    assert not (smap.looked & ~smap.explored).any()
+    farther = _mapper(MapConfig(look_distance_m=5.0)).update(_wall(4.5), None, START, 0.0)
+    assert farther.looked[row, cols].all()
+
+
 def test_depth_at_or_beyond_max_range_is_dropped():
     smap = _mapper().update(_wall(5.0), None, START, 0.0)
     assert not smap.obstacle.any() and not _outside_footprint(smap).any()

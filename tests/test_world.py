@@ -208,3 +208,51 @@ def test_no_goal_object_of_the_gibson_houses_is_walled_in():
                     if not (ring & open_cells).any() and not far:
                         walled.append((name, goal, k))
     assert walled == []
+
+
+def _pixels(scene: SceneMap, category: str, row: int, col: int, heading: float) -> int:
+    """Pixels of ``category`` seen from the cell (row, col) at camera height, tilt 0, 120x160."""
+    from l3mvn.sim.render import Renderer
+    from l3mvn.sim.types import Pose
+
+    assert scene.walkable[row, col], "the viewpoint must be a standing pose"
+    x, y = scene.cell_center(row, col)
+    frame = Renderer(build_world(scene, SimConfig()), SimConfig()).render(Pose(x, y, heading), 0.0, 120, 160)
+    return int(np.count_nonzero(frame.semantic == scene.categories.index(category) + 1))
+
+
+def test_a_toilet_drawn_inside_an_oven_footprint_keeps_every_cell_and_shows_from_the_floor():
+    # Pomaria: the map draws a toilet inside an oven's footprint; tallest-wins built only the oven.
+    oven = (slice(4, 20), slice(76, 96))
+    toilet = (slice(6, 14), slice(82, 90))
+    scene = two_rooms(("oven", "toilet"), {"oven": oven, "toilet": toilet})
+    world = build_world(scene, SimConfig())
+    tri = world.vertices[world.triangles]
+    tops = world.tri_normal[:, 2] > 0.5
+    assert _area(tri[tops & (world.tri_category == 2)]) == pytest.approx(8 * 8 * 0.05**2, rel=1e-4)
+    assert _area(tri[tops & (world.tri_category == 1)]) == pytest.approx((16 * 20 - 64) * 0.05**2, rel=1e-4)
+    assert _pixels(scene, "toilet", 36, 86, -np.pi / 2) >= 30
+
+
+def test_a_plant_behind_a_taller_sink_shows_over_it():
+    sink = (slice(10, 18), slice(66, 100))
+    plant = (slice(4, 10), slice(80, 86))
+    scene = two_rooms(("sink", "potted plant"), {"sink": sink, "potted plant": plant})
+    gap = ndi.distance_transform_edt(~scene.free)[plant].min()
+    assert gap > 2, "the plant must stand behind the sink, away from the floor"
+    assert category_profile("sink").height > SimConfig().camera_height_m > category_profile("potted plant").height
+    assert _pixels(scene, "potted plant", 36, 83, -np.pi / 2) >= 30
+    world = build_world(scene, SimConfig())
+    sink_z = world.vertices[world.triangles[world.tri_category == 1]][..., 2]
+    assert sink_z.max() == pytest.approx(0.9)  # only the part in the plant's corridor is cut down
+
+
+def test_a_small_item_drawn_over_a_goal_object_neither_stacks_on_it_nor_rings_it():
+    # Marstons: a vase footprint covering and surrounding a potted plant buried it in a 1.05 m ring.
+    vase = (slice(26, 40), slice(76, 90))
+    plant = (slice(30, 36), slice(80, 86))
+    scene = two_rooms(("vase", "potted plant"), {"vase": vase, "potted plant": plant})
+    world = build_world(scene, SimConfig())
+    plant_z = world.vertices[world.triangles[world.tri_category == 2]][..., 2]
+    assert plant_z.max() == pytest.approx(category_profile("potted plant").height)
+    assert _pixels(scene, "potted plant", 50, 83, -np.pi / 2) >= 30

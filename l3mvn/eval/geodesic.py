@@ -83,6 +83,12 @@ def goal_region(scene: SceneMap, goal: str, cfg: SimConfig) -> GoalRegion:
         raise L3MVNError(
             f"goal {goal!r} is not present in scene {scene.key}; present goals: {', '.join(scene.present_goals()) or 'none'}"
         )
+    return footprint_region(scene, footprint, cfg, goal)
+
+
+def footprint_region(scene: SceneMap, footprint: np.ndarray, cfg: SimConfig, label: str) -> GoalRegion:
+    """The success region of any footprint mask under ``cfg.success_rule`` (``goal_region`` passes a
+    category's; the scene audit passes one instance's); ``label`` names it in the result."""
     res = scene.resolution_m
     trav = scene.traversible
     radius = int(round(cfg.success_distance_m / res))
@@ -99,5 +105,5 @@ def goal_region(scene: SceneMap, goal: str, cfg: SimConfig) -> GoalRegion:
         region = trav & (to_object <= cfg.success_distance_m)
         dist = geodesic_field(trav, region, res)
         offset = 0.0
-    return GoalRegion(goal=goal, rule=cfg.success_rule, region=region & np.isfinite(dist),
+    return GoalRegion(goal=label, rule=cfg.success_rule, region=region & np.isfinite(dist),
                       distance_m=dist, length_offset_m=offset, resolution_m=res)

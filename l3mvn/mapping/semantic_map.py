@@ -46,6 +46,10 @@ class MapConfig:
     # binned this finely across the view; 0 turns it off). Without it, floor nearer than the lowest
     # image row (1.4 m at tilt 0) stays unexplored and leaves phantom frontiers along every wall.
     free_space_bins: int = 160
+    # A cell is "looked at" once seen from within this distance: close enough that an object there
+    # would have mapped to enough cells to confirm. Explored from farther (a room seen through a
+    # door across the house) tells where the floor is, not what stands on it.
+    look_distance_m: float = 2.5
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.resolution_m) and self.resolution_m > 0):
@@ -72,6 +76,8 @@ class MapConfig:
             )
         if not self.max_depth_m > 0:
             raise L3MVNError(f"max_depth_m must be positive, got {self.max_depth_m}")
+        if not (math.isfinite(self.look_distance_m) and self.look_distance_m > 0):
+            raise L3MVNError(f"look_distance_m must be positive, got {self.look_distance_m}")
         if not self.footprint_radius_m >= 0:
             raise L3MVNError(f"footprint_radius_m must be >= 0, got {self.footprint_radius_m}")
 
@@ -105,7 +111,8 @@ class SemanticMap:
     """The map as the rest of the agent sees it. (M, M) / (K, M, M) bool grids, row = y, col = x.
 
     The arrays are live views of the mapper's state (no per-step copy of a 960x960xK map): they change
-    on the next ``update``; call ``copy()`` to keep a snapshot. ``start_xy`` is the world position of
+    on the next ``update``; call ``copy()`` to keep a snapshot. ``looked`` is the part of ``explored``
+    seen from within ``MapConfig.look_distance_m`` (see there). ``start_xy`` is the world position of
     the map centre; ``agent_heading`` is in radians, counter-clockwise from +x.
     """
 
@@ -114,6 +121,7 @@ class SemanticMap:
     visited: np.ndarray
     categories: np.ndarray
     category_names: tuple[str, ...]
+    looked: np.ndarray
     resolution_m: float
     start_xy: tuple[float, float]
     agent_cell: tuple[int, int]
@@ -194,6 +202,7 @@ class SemanticMap:
             visited=self.visited.copy(),
             categories=self.categories.copy(),
             category_names=self.category_names,
+            looked=self.looked.copy(),
             resolution_m=self.resolution_m,
             start_xy=self.start_xy,
             agent_cell=self.agent_cell,
@@ -227,6 +236,7 @@ class SemanticMapper:
         self._obstacle = np.zeros((m, m), dtype=bool)
         self._explored = np.zeros((m, m), dtype=bool)
         self._visited = np.zeros((m, m), dtype=bool)
+        self._looked = np.zeros((m, m), dtype=bool)
         self._categories = np.zeros((k, m, m), dtype=bool)
         # Saturates at the threshold: only "reached it or not" matters, and it can never overflow.
         self._counts = np.zeros((k, m, m), dtype=np.uint16)
@@ -244,6 +254,7 @@ class SemanticMapper:
             visited=self._visited,
             categories=self._categories,
             category_names=self.category_names,
+            looked=self._looked,
             resolution_m=self.cfg.resolution_m,
             start_xy=(self._start.x, self._start.y),
             agent_cell=self._cell,
@@ -254,7 +265,7 @@ class SemanticMapper:
 
     def reset(self, start_pose: Pose) -> SemanticMap:
         """Clear everything; ``start_pose`` becomes the map centre (heading kept as is)."""
-        for grid in (self._obstacle, self._explored, self._visited, self._categories, self._counts):
+        for grid in (self._obstacle, self._explored, self._visited, self._looked, self._categories, self._counts):
             grid.fill(0)
         self._start = start_pose
         self._cell = (self.cfg.map_cells // 2, self.cfg.map_cells // 2)
@@ -286,7 +297,7 @@ class SemanticMapper:
 
         relative = Pose(dx, dy, pose.heading)
         cloud = depth_to_points(depth, self.intrinsics, relative, tilt, semantic, cfg.max_depth_m)
-        self._splat(cloud.points, cloud.labels)
+        self._splat(cloud.points, cloud.labels, dx, dy)
         self._carve(cloud.points, dx, dy, pose.heading)
         self._draw_visited(self._cell, cell)
         self._mark_footprint(cell)
@@ -294,7 +305,7 @@ class SemanticMapper:
         self._heading = pose.heading
         return self.map
 
-    def _splat(self, points: np.ndarray, labels: np.ndarray) -> None:
+    def _splat(self, points: np.ndarray, labels: np.ndarray, x: float, y: float) -> None:
         cfg, size = self.cfg, self.cfg.map_cells
         half = size // 2
         cols = np.floor(points[:, 0] / cfg.resolution_m).astype(np.int64) + half
@@ -303,9 +314,11 @@ class SemanticMapper:
         keep = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size) & (z >= cfg.floor_min_height_m)
         flat = rows[keep] * size + cols[keep]
         z, labels = z[keep], labels[keep]
+        near = np.hypot(points[keep, 0] - x, points[keep, 1] - y) <= cfg.look_distance_m
 
         below_top = z <= self.obstacle_max_height_m
         self._explored.reshape(-1)[flat[below_top]] = True
+        self._looked.reshape(-1)[flat[below_top & near]] = True
         self._obstacle.reshape(-1)[flat[below_top & (z >= cfg.obstacle_min_height_m)]] = True
 
         labelled = (labels > 0) & (z <= cfg.category_max_height_m)
@@ -349,7 +362,10 @@ class SemanticMapper:
         cols = np.floor(xs / cfg.resolution_m).astype(np.int64) + half_cells
         rows = np.floor(ys / cfg.resolution_m).astype(np.int64) + half_cells
         inside = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size)
-        self._explored.reshape(-1)[rows[inside] * size + cols[inside]] = True
+        flat = rows[inside] * size + cols[inside]
+        self._explored.reshape(-1)[flat] = True
+        near = np.broadcast_to(steps[None, :] <= cfg.look_distance_m, ok.shape)[ok][inside]
+        self._looked.reshape(-1)[flat[near]] = True
 
     def _draw_visited(self, start: tuple[int, int], end: tuple[int, int]) -> None:
         """Rasterise the step as an 8-connected line so the trajectory has no gaps."""
@@ -363,6 +379,7 @@ class SemanticMapper:
     def _mark_footprint(self, cell: tuple[int, int]) -> None:
         rr, cc = _footprint_cells(cell, self.cfg.footprint_radius_cells, self.cfg.map_cells)
         self._explored[rr, cc] = True
+        self._looked[rr, cc] = True
 
 
 def _cells(dx, dy, resolution_m: float, size: int) -> tuple[np.ndarray, np.ndarray]:

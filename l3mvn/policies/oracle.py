@@ -13,7 +13,9 @@ import zlib
 
 import numpy as np
 
-from l3mvn.eval.geodesic import geodesic_field
+from scipy import ndimage as ndi
+
+from l3mvn.eval.geodesic import GoalRegion, geodesic_field
 from l3mvn.policies.global_policies import Selection
 from l3mvn.sim.simulator import BuiltinSimulator
 from l3mvn.sim.types import Action, Episode, Observation, Pose
@@ -70,28 +72,60 @@ class OraclePolicy:
         return float(self._field[r, c]) if self.env.scene.in_bounds(r, c) else math.inf
 
 
-def frontier_goal_distances(frontiers, sem_map, region) -> np.ndarray:
-    """Ground-truth geodesic from each frontier (its nearest cell) to the goal's success region, in
-    metres; inf where no cell of it lies on the ground-truth floor."""
+def frontier_goal_distances(frontiers, sem_map, region: GoalRegion) -> np.ndarray:
+    """Ground-truth geodesic from each frontier (its nearest cell) to ``region`` (a success region,
+    or ``object_distances``), in metres; inf where no cell of it lies on the ground-truth floor."""
     return np.array([
         region.distances_at(*sem_map.cell_to_world(f.cells[:, 0], f.cells[:, 1])).min() for f in frontiers
     ], dtype=np.float64)
 
 
+def object_distances(env: BuiltinSimulator, goal: str) -> GoalRegion:
+    """Ground-truth geodesic distance over the floor to the floor beside each goal object: the
+    traversible cells nearest to it (within the agent's radius and a cell, or the smallest distance
+    up to the success distance at which the instance has floor), as a GoalRegion for its lookups."""
+    scene = env.scene
+    res = scene.resolution_m
+    labels, n = ndi.label(scene.category_mask(goal), structure=np.ones((3, 3), dtype=bool))
+    trav = scene.traversible
+    first = math.ceil(env.cfg.agent_radius_m / res) + 1
+    last = max(first, math.ceil(env.cfg.success_distance_m / res))
+    sources = np.zeros_like(trav)
+    for box_id, box in enumerate(ndi.find_objects(labels), start=1):
+        pad = last + 1
+        window = (slice(max(box[0].start - pad, 0), box[0].stop + pad),
+                  slice(max(box[1].start - pad, 0), box[1].stop + pad))
+        near = ndi.distance_transform_edt(labels[window] != box_id)
+        floor = trav[window]
+        reach = near[floor]
+        if reach.size and reach.min() <= last:
+            sources[window] |= floor & (near <= max(first, float(reach.min())))
+    field = geodesic_field(trav, sources, res)
+    return GoalRegion(goal=goal, rule="object", region=sources, distance_m=field, length_offset_m=0.0,
+                      resolution_m=res)
+
+
 class FrontierOracle:
     """Global policy: the frontier that minimises (travel cost to it + ground-truth geodesic distance
-    from it to the goal's success region). Same agent, same frontiers, perfect prior."""
+    from it to the goal object). Same agent, same frontiers, perfect prior.
+
+    The distance is to the object, not to its success region: under the SemExp rule that region
+    reaches through walls, and ranking by it led the ceiling to the far side of a bathroom wall,
+    where the agent can never see the toilet it must confirm before stopping (Klickitat)."""
 
     name = "oracle-frontier"
 
     def __init__(self, env: BuiltinSimulator) -> None:
         self.env = env
+        self._distances: dict[str, GoalRegion] = {}
 
     def select(self, frontiers, sem_map, goal, rng):
         if not frontiers:
             return None
+        if goal not in self._distances:
+            self._distances[goal] = object_distances(self.env, goal)
         cost = np.array([f.cost for f in frontiers], dtype=np.float64)
-        to_goal = frontier_goal_distances(frontiers, sem_map, self.env.region(goal))
+        to_goal = frontier_goal_distances(frontiers, sem_map, self._distances[goal])
         if not np.isfinite(to_goal).any():
             # Frontier cells off the ground-truth floor everywhere (early, in a narrow spot): say so.
             i = int(np.argmin(cost))

@@ -12,6 +12,9 @@ artefacts are repaired first, because the camera would otherwise show them to th
 * an object farther from the free floor than that ring stands in floor the navmesh lost (a bathroom
   too narrow for it, a niche): a door-wide opening between the object and its nearest floor becomes
   floor (``_view_corridors``), so the object shows from the house as it would through a door;
+* footprints of two categories may overlap: the smaller instance keeps the shared cells, and another
+  object standing between a goal object and its floor is cut below the goal's top
+  (``_object_boxes``), so no goal object is erased or hidden behind taller furniture;
 * wall components smaller than ``_SPECK_MAX_M2`` are rasterisation specks and become floor, while a
   one-cell wall line between rooms is long and stays. Compact free-standing components up to
   ``_FURNITURE_MAX_M2`` are unlabelled furniture (a kitchen island, a cabinet) and are built to table
@@ -30,7 +33,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from l3mvn.config import SimConfig
-from l3mvn.scenes.scene import SceneMap
+from l3mvn.scenes.scene import GOAL_CATEGORIES, SceneMap
 
 _MARGIN_GAP_CELLS = 3.2  # d(object) + d(free) of a ring cell; a 2-cell ring scores 3, a wall >= 4
 # An object farther than the ring from free floor (a plant in a corner, a tv in a niche, a toilet in a
@@ -41,6 +44,10 @@ _MARGIN_GAP_CELLS = 3.2  # d(object) + d(free) of a ring cell; a 2-cell ring sco
 _CORRIDOR_MAX_CELLS = 20
 _CORRIDOR_SLACK_CELLS = 1.5
 _CORRIDOR_HALF_WIDTH_CELLS = 8  # a 0.8 m door
+# An object standing in a goal object's view corridor is cut to this far below the goal's top, and
+# never lower than this above its own base (a tv stays a tv on its stand).
+_OCCLUDER_BELOW_M = 0.3
+_OCCLUDER_MIN_M = 0.2
 _SPECK_MAX_M2 = 0.04  # smaller than a 20 x 20 cm pillar
 _FURNITURE_MAX_M2 = 1.5
 _FURNITURE_MIN_THICKNESS_M = 0.25  # thinner free-standing pieces are partition walls, kept full height
@@ -155,7 +162,8 @@ def category_profile(name: str) -> _Profile:
 def build_world(scene: SceneMap, cfg: SimConfig) -> World:
     res = float(scene.resolution_m)
     top = float(cfg.wall_height_m)
-    walls, furniture = wall_grids(scene)
+    corridors = view_corridors(scene)
+    walls, furniture = wall_grids(scene, corridors)
     mesh = _MeshBuilder(res)
     h, w = scene.shape
     mesh.horizontal_quad(0.0, 0.0, w * res, h * res, 0.0, up=True, category=0, rgb=_FLOOR_RGB)
@@ -166,20 +174,33 @@ def build_world(scene: SceneMap, cfg: SimConfig) -> World:
         furniture, 0.0, min(_FURNITURE_HEIGHT_M, top), category=0, rgb=_FURNITURE_RGB,
         blocked=walls, smooth=True,
     )
-    for mask, z0, z1, category, rgb in _object_boxes(scene, top):
+    for mask, z0, z1, category, rgb in _object_boxes(scene, top, corridors):
         mesh.prism(mask, z0, z1, category=category, rgb=rgb, blocked=walls, bottoms=z0 > 0.0)
     return mesh.build(walls, furniture)
 
 
-def wall_grids(scene: SceneMap) -> tuple[np.ndarray, np.ndarray]:
-    """(walls, furniture): non-free, non-object cells cleaned of the object ring and specks."""
+@dataclass(frozen=True, eq=False)
+class Corridor:
+    """The cells between one object instance and its nearest free floor (``cells``, in ``window``;
+    the instance itself excluded) that must stay see-through for the object to show from that floor."""
+
+    channel: int
+    window: tuple[slice, slice]
+    member: np.ndarray
+    cells: np.ndarray
+
+
+def wall_grids(scene: SceneMap, corridors: list[Corridor] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(walls, furniture): non-free, non-object cells cleaned of the object ring, view corridors and
+    specks. ``corridors``: ``view_corridors(scene)`` when the caller has them already."""
     free, objects = scene.free, scene.object_any
     solid = ~free & ~objects
     d_obj = ndi.distance_transform_edt(~objects) if objects.any() else np.full(free.shape, np.inf)
     if free.any():
-        d_free, nearest = ndi.distance_transform_edt(~free, return_indices=True)
+        d_free = ndi.distance_transform_edt(~free)
         solid &= d_free + d_obj > _MARGIN_GAP_CELLS
-        solid &= ~_view_corridors(scene.objects, d_free, nearest)
+        for c in view_corridors(scene) if corridors is None else corridors:
+            solid[c.window] &= ~c.cells
     labels, n = ndi.label(solid, structure=np.ones((3, 3), dtype=bool))
     if n == 0:
         return solid, np.zeros_like(solid)
@@ -197,32 +218,38 @@ def wall_grids(scene: SceneMap) -> tuple[np.ndarray, np.ndarray]:
     return grid == 1, grid == 2
 
 
-def _view_corridors(categories: np.ndarray, d_free: np.ndarray, nearest: np.ndarray) -> np.ndarray:
-    """Never wall in an object: for each footprint (per category, so a plant beside a couch counts
-    on its own) whose nearest free floor lies beyond the ring, two sets of cells are floor, not wall:
-    the band d(footprint) + d(free) <= that distance + slack (the navmesh's eroded margin between
-    the two) and, widened to a door, the room the navmesh lost between them (a bathroom around its
-    toilet). Real walls are thin lines; solid this thick next to an object is floor too narrow for
-    the navmesh or clutter. A wall behind the object (seen from the floor) or farther than half the
-    gap from both stays. ``d_free`` and ``nearest``: distance to and index of the nearest free cell."""
-    any_object = categories.any(axis=0)
-    out = np.zeros(any_object.shape, dtype=bool)
+def view_corridors(scene: SceneMap) -> list[Corridor]:
+    """Never wall in or hide an object: for each footprint (per category, so a plant beside a couch
+    counts on its own) whose nearest free floor lies beyond the ring, two sets of cells must stay
+    see-through: the band d(footprint) + d(free) <= that distance + slack (the navmesh's eroded
+    margin between the two) and, widened to a door, the room the navmesh lost between them (a
+    bathroom around its toilet). Real walls are thin lines; solid this thick next to an object is
+    floor too narrow for the navmesh or clutter, so ``wall_grids`` opens it; another object standing
+    in it (a sink in front of a plant) is cut down by ``_object_boxes``. A wall behind the object
+    (seen from the floor) or farther than half the gap from both stays."""
+    free = scene.free
+    out: list[Corridor] = []
+    if not free.any():
+        return out
+    d_free, nearest = ndi.distance_transform_edt(~free, return_indices=True)
     w = _CORRIDOR_HALF_WIDTH_CELLS
-    for channel in categories:
+    shape = free.shape
+    for k, channel in enumerate(scene.objects):
         if not channel.any():
             continue
         labels, _ = ndi.label(channel, structure=np.ones((3, 3), dtype=bool))
-        for k, box in enumerate(ndi.find_objects(labels), start=1):
+        for n, box in enumerate(ndi.find_objects(labels), start=1):
             if box is None:
                 continue
-            member = labels[box] == k
+            member = labels[box] == n
             gap = float(d_free[box][member].min())
             if gap <= 2.0 or gap > _CORRIDOR_MAX_CELLS:  # 2 cells: the plain ring already opens it
                 continue
             pad = int(np.ceil(gap + 2 * w)) + 1
             r0, c0 = max(box[0].start - pad, 0), max(box[1].start - pad, 0)
-            r1, c1 = min(box[0].stop + pad, out.shape[0]), min(box[1].stop + pad, out.shape[1])
-            d_obj = ndi.distance_transform_edt(labels[r0:r1, c0:c1] != k)
+            r1, c1 = min(box[0].stop + pad, shape[0]), min(box[1].stop + pad, shape[1])
+            own = labels[r0:r1, c0:c1] == n
+            d_obj = ndi.distance_transform_edt(~own)
             d_fl = d_free[r0:r1, c0:c1]
             band = d_obj + d_fl <= gap + _CORRIDOR_SLACK_CELLS
             # The lost room: the same band with a door's slack (its half-width at the middle is
@@ -235,41 +262,67 @@ def _view_corridors(categories: np.ndarray, d_free: np.ndarray, nearest: np.ndar
             rows, cols = np.mgrid[r0:r1, c0:c1]
             ahead = (rows - edge[0]) * v[0] + (cols - edge[1]) * v[1] >= -float(np.hypot(*v))
             passage = (d_obj + d_fl <= gap + slack) & (np.minimum(d_obj, d_fl) <= gap / 2) & ahead
-            out[r0:r1, c0:c1] |= (band | passage) & ~any_object[r0:r1, c0:c1]
+            out.append(Corridor(k, (slice(r0, r1), slice(c0, c1)), own, (band | passage) & ~own))
     return out
 
 
-def _object_boxes(scene: SceneMap, ceiling: float):
+def _object_boxes(scene: SceneMap, ceiling: float, corridors: list[Corridor]):
     """Yield (mask, z0, z1, category_id, rgb) boxes, one category per cell and layer.
 
-    Floor-standing categories compete for a cell (the tallest wins, so a chair tucked under a table
-    still shows its back); items stack on the winner's top; wall items hang above both.
+    Floor-standing footprints that overlap give the cell to the smaller instance: a chair tucked
+    under a table keeps its whole seat, and a toilet drawn inside an oven's footprint stays a toilet
+    instead of vanishing (tallest-wins erased Pomaria's toilet: 0 pixels from 463 poses).
+    Another object standing in a goal object's view corridor is cut to ``_OCCLUDER_BELOW_M`` under
+    the goal's top (never below its own stand), so a plant behind a sink shows over it. Items
+    stack on the winner's top, except on a goal object or in its corridor (Marstons: a vase drawn
+    over a plant stacked on it and ringed it at 1.05 m, burying it); wall items hang above both.
     """
     profiles = [category_profile(c) for c in scene.categories]
     shape = scene.shape
+    goal_ids = {scene.categories.index(g) for g in GOAL_CATEGORIES if g in scene.categories}
+    clear = np.zeros(shape, dtype=bool)  # goal footprints and their view corridors: no items there
+    for k in goal_ids:
+        clear |= scene.objects[k]
+    for c in corridors:
+        if c.channel in goal_ids:
+            clear[c.window] |= c.cells
     floor_top = np.zeros(shape, dtype=np.float64)
     floor_ids = [k for k, p in enumerate(profiles) if p.kind == "floor" and scene.objects[k].any()]
     if floor_ids:
+        size = np.stack([_instance_areas(scene.objects[k]) for k in floor_ids])
+        winner = np.argmin(size, axis=0)
+        has = np.isfinite(size.min(axis=0))
         tops = np.array([min(profiles[k].base + profiles[k].height, ceiling) for k in floor_ids])
-        score = np.where(scene.objects[floor_ids], tops[:, None, None], -1.0)
-        winner = np.argmax(score, axis=0)
-        has = score.max(axis=0) >= 0.0
+        bases = np.array([profiles[k].base for k in floor_ids])
+        top = np.where(has, tops[winner], 0.0)
+        cap = np.full(shape, np.inf)
+        for c in corridors:
+            if c.channel not in goal_ids:
+                continue
+            p = profiles[c.channel]
+            view = c.cells & has[c.window] & (winner[c.window] != floor_ids.index(c.channel)) \
+                if c.channel in floor_ids else c.cells & has[c.window]
+            cap[c.window][view] = np.minimum(cap[c.window][view], p.base + p.height - _OCCLUDER_BELOW_M)
+        top = np.minimum(top, np.maximum(cap, bases[winner] + _OCCLUDER_MIN_M))
         for i, k in enumerate(floor_ids):
-            mask = has & (winner == i)
-            if not mask.any():
+            mine = has & (winner == i)
+            if not mine.any():
                 continue
             p = profiles[k]
-            if p.base > 0.0:
-                yield mask, 0.0, p.base, 0, _STAND_RGB
-            yield mask, p.base, tops[i], k + 1, p.rgb
-            floor_top[mask] = tops[i]
+            for z1 in np.unique(top[mine]):
+                mask = mine & (top == z1)
+                if p.base > 0.0:
+                    yield mask, 0.0, p.base, 0, _STAND_RGB
+                yield mask, p.base, float(z1), k + 1, p.rgb
+                floor_top[mask] = z1
     stack_top = floor_top.copy()
     for kind in ("top", "wall"):
         ids = [k for k, p in enumerate(profiles) if p.kind == kind and scene.objects[k].any()]
         if not ids:
             continue
         heights = np.array([profiles[k].height for k in ids])
-        score = np.where(scene.objects[ids], heights[:, None, None], -1.0)
+        drawn = scene.objects[ids] & ~clear if kind == "top" else scene.objects[ids]
+        score = np.where(drawn, heights[:, None, None], -1.0)
         winner = np.argmax(score, axis=0)
         has = score.max(axis=0) >= 0.0
         for i, k in enumerate(ids):
@@ -290,6 +343,14 @@ def _object_boxes(scene: SceneMap, ceiling: float):
                 if z1 > z0:
                     yield part, float(z0), z1, k + 1, p.rgb
                     stack_top[part] = z1
+
+
+def _instance_areas(mask: np.ndarray) -> np.ndarray:
+    """Per cell, the area (cells) of the 8-connected instance it belongs to; inf off the mask."""
+    labels, _ = ndi.label(mask, structure=np.ones((3, 3), dtype=bool))
+    area = np.bincount(labels.ravel()).astype(np.float64)
+    area[0] = np.inf
+    return area[labels]
 
 
 class _MeshBuilder:
