@@ -157,6 +157,7 @@ class MapAgent:
         self._target_escapes = 0
         self._viewpoint: tuple[int, int] | None = None
         self._pressing: tuple[int, int] | None = None  # frontier goal walked up to (frontier_press_m)
+        self._stood: set[tuple[int, int]] = set()  # done goals the agent stood on and looked beyond
         self._views: list[float] = []  # bearings (from the glimpsed target) it was looked at from
         self._glimpse: tuple[int, int] | None = None  # where a sighting beyond the depth range points
         self._frame: tuple[np.ndarray, np.ndarray] | None = None  # the last mapped depth and labels
@@ -249,6 +250,8 @@ class MapAgent:
             # Reached (or found unreachable, or no nearer for a while) an exploration goal: never come
             # back to it, and pick the next one now rather than spending this step on a goal that is done.
             self._blocked.append(self._ltg)
+            if self._ltg == self._pressing and plan.reached:
+                self._stood.add(self._ltg)
             more_f, more_p = self._reselect(sem_map)
             frontiers_ms, policy_ms = frontiers_ms + more_f, policy_ms + more_p
             goal, kind, reason = self._ltg, self._ltg_kind, self._ltg_reason
@@ -530,8 +533,15 @@ class MapAgent:
         return extract_frontiers(sem_map.explored, sem_map.obstacle, sem_map.agent_cell, field_,
                                  sem_map.categories, sem_map.category_names, self.cfg.frontier,
                                  blocked=np.array(self._blocked, dtype=np.int64).reshape(-1, 2),
-                                 blocked_radius_cells=self.cfg.blocked_radius_m / sem_map.resolution_m,
+                                 blocked_radius_cells=self._blocked_radii(sem_map.resolution_m),
                                  agent_heading=sem_map.agent_heading)
+
+    def _blocked_radii(self, resolution_m: float) -> np.ndarray:
+        """Cells around each done goal where frontiers are dropped: ``blocked_radius_m``, halved for a
+        frontier the agent stood on and looked beyond (only that spot is done: Lakeville/0/1's
+        bathroom door lay 0.7 m from such a spot and the full radius dropped it for good)."""
+        full = self.cfg.blocked_radius_m / resolution_m
+        return np.array([full / 2 if cell in self._stood else full for cell in self._blocked], dtype=np.float64)
 
     def _select(self, sem_map: SemanticMap) -> None:
         self._since_select = 0

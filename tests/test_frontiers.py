@@ -162,6 +162,23 @@ def test_blocked_frontiers_are_dropped_before_the_far_limit_so_far_ones_return()
         extract_frontiers(explored, obstacle, agent, distance, maps, (), blocked=np.array([1, 2, 3]))
 
 
+def test_each_blocked_cell_can_have_its_own_radius():
+    explored, obstacle, agent = two_door_room()
+    maps = np.zeros((0, *explored.shape), dtype=bool)
+    distance = straight_line(explored.shape, agent)
+    near = extract(explored, obstacle, agent)[0].center  # the left door, at column 10
+    beside = np.array([[near[0] + 8, near[1]]])  # a done goal 8 cells along the door
+
+    def centres(radii):
+        return [f.center[1] for f in extract_frontiers(explored, obstacle, agent, distance, maps, (),
+                                                       blocked=beside, blocked_radius_cells=radii)]
+
+    assert centres(np.array([10.0])) == [90]  # the door lies within 10 cells: dropped
+    assert centres(np.array([5.0])) == [10, 90]  # within a 5-cell radius only the done spot: kept
+    with pytest.raises(L3MVNError, match="one radius per blocked cell"):
+        centres(np.array([5.0, 5.0]))
+
+
 @pytest.mark.parametrize("unreachable", [np.inf, np.nan])
 def test_frontier_cells_marked_unreachable_take_the_distance_of_a_reachable_neighbour(unreachable):
     explored, obstacle, agent = corridor_open_at_right()

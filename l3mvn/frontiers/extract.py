@@ -49,7 +49,7 @@ def extract_frontiers(
     category_names: tuple[str, ...],
     cfg: FrontierConfig = FrontierConfig(),
     blocked: np.ndarray | None = None,
-    blocked_radius_cells: float = 0.0,
+    blocked_radius_cells: float | np.ndarray = 0.0,
     agent_heading: float | None = None,
 ) -> list[Frontier]:
     """Frontiers of an (H, W) map, best S_CU first, ids 0..n-1 in that order.
@@ -57,14 +57,16 @@ def extract_frontiers(
     explored, obstacle: bool (H, W); agent_cell: (row, col); distance_m: float (H, W) geodesic
     distance from the agent, inf where unreachable; category_maps: bool (K, H, W) named by
     ``category_names``. blocked: (N, 2) cells the caller is done with (reached or unreachable
-    goals); a cluster whose candidate lies within ``blocked_radius_cells`` of one is dropped
-    before the far limit, so frontiers beyond it stay eligible once the near ones are used up.
+    goals); a cluster whose candidate lies within ``blocked_radius_cells`` of one (a radius, or one
+    per blocked cell) is dropped before the far limit, so frontiers beyond it stay eligible once the
+    near ones are used up.
     agent_heading (radians): with ``cfg.turn_cost_m_per_rad`` > 0, a frontier's cost C is its
     geodesic distance plus the turning needed to face it, so a frontier straight ahead beats an
     equally near one behind (turns spend the step budget as forward moves do).
     """
     _validate(explored, obstacle, agent_cell, distance_m, category_maps, category_names, cfg)
-    if blocked_radius_cells < 0:
+    radius = np.asarray(blocked_radius_cells, dtype=np.float64)
+    if (radius < 0).any():
         raise L3MVNError(f"blocked_radius_cells must be >= 0, got {blocked_radius_cells}")
     if blocked is not None:
         blocked = np.asarray(blocked)
@@ -95,7 +97,10 @@ def extract_frontiers(
     distances = _cluster_distances(cells, bounds, centers, distance_m)
     if blocked is not None:
         gap = np.hypot(centers[:, None, 0] - blocked[None, :, 0], centers[:, None, 1] - blocked[None, :, 1])
-        distances = np.where(gap.min(axis=1) <= blocked_radius_cells, np.inf, distances)
+        if radius.ndim and radius.shape != (len(blocked),):
+            raise L3MVNError(f"blocked_radius_cells: one radius per blocked cell, got {radius.shape[0]} "
+                             f"for {len(blocked)}")
+        distances = np.where((gap <= radius).any(axis=1), np.inf, distances)
     keep = _distance_filter(distances, cfg)
     if keep.size == 0:
         return []
