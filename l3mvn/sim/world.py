@@ -11,7 +11,7 @@ artefacts are repaired first, because the camera would otherwise show them to th
   survives;
 * an object farther from the free floor than that ring stands in floor the navmesh lost (a bathroom
   too narrow for it, a niche): a door-wide opening between the object and its nearest floor becomes
-  floor (``_view_corridors``), so the object shows from the house as it would through a door;
+  floor (``view_corridors``), so the object shows from the house as it would through a door;
 * footprints of two categories may overlap: the smaller instance keeps the shared cells, and another
   object standing between a goal object and its floor is cut below the goal's top
   (``_object_boxes``), so no goal object is erased or hidden behind taller furniture;
@@ -186,7 +186,6 @@ class Corridor:
 
     channel: int
     window: tuple[slice, slice]
-    member: np.ndarray
     cells: np.ndarray
 
 
@@ -262,7 +261,7 @@ def view_corridors(scene: SceneMap) -> list[Corridor]:
             rows, cols = np.mgrid[r0:r1, c0:c1]
             ahead = (rows - edge[0]) * v[0] + (cols - edge[1]) * v[1] >= -float(np.hypot(*v))
             passage = (d_obj + d_fl <= gap + slack) & (np.minimum(d_obj, d_fl) <= gap / 2) & ahead
-            out.append(Corridor(k, (slice(r0, r1), slice(c0, c1)), own, (band | passage) & ~own))
+            out.append(Corridor(k, (slice(r0, r1), slice(c0, c1)), (band | passage) & ~own))
     return out
 
 
@@ -300,8 +299,9 @@ def _object_boxes(scene: SceneMap, ceiling: float, corridors: list[Corridor]):
             if c.channel not in goal_ids:
                 continue
             p = profiles[c.channel]
-            view = c.cells & has[c.window] & (winner[c.window] != floor_ids.index(c.channel)) \
-                if c.channel in floor_ids else c.cells & has[c.window]
+            view = c.cells & has[c.window]
+            if c.channel in floor_ids:  # cells its own category won are the goal object's, not in front
+                view &= winner[c.window] != floor_ids.index(c.channel)
             cap[c.window][view] = np.minimum(cap[c.window][view], p.base + p.height - _OCCLUDER_BELOW_M)
         top = np.minimum(top, np.maximum(cap, bases[winner] + _OCCLUDER_MIN_M))
         for i, k in enumerate(floor_ids):
