@@ -96,9 +96,8 @@ class AgentConfig:
             raise L3MVNError("replan_every, target_min_cells and goal_patience_steps must be >= 1")
         if not 0 < self.stop_distance_m <= self.blocked_stop_distance_m:
             raise L3MVNError("stop distances must satisfy 0 < stop_distance_m <= blocked_stop_distance_m")
-        if not 15.0 <= self.look_tolerance_deg < 90.0:
-            # Below half a 30-degree turn the agent could turn past the goal and back forever.
-            raise L3MVNError(f"look_tolerance_deg must lie in [15, 90), got {self.look_tolerance_deg}")
+        if not 0 < self.look_tolerance_deg < 90.0:
+            raise L3MVNError(f"look_tolerance_deg must lie in (0, 90), got {self.look_tolerance_deg}")
         if self.candidate_views < 0 or self.look_min_area_m2 < 0:
             raise L3MVNError("candidate_views and look_min_area_m2 must be >= 0")
         if not 0 < self.frontier_press_m < self.frontier_reached_m:
@@ -121,6 +120,9 @@ class MapAgent:
         if self.cfg.blocked_stop_distance_m >= sim.success_distance_m:
             raise L3MVNError(f"blocked_stop_distance_m ({self.cfg.blocked_stop_distance_m} m) must be below the "
                              f"success distance ({sim.success_distance_m} m): a stop there never succeeds")
+        if self.cfg.look_tolerance_deg < sim.turn_angle_deg / 2:
+            raise L3MVNError(f"look_tolerance_deg ({self.cfg.look_tolerance_deg}) must be >= half the turn angle "
+                             f"({sim.turn_angle_deg / 2}): else the agent turns past its goal and back forever")
         self.global_policy = global_policy
         self.categories = categories
         self.sim = sim

@@ -362,3 +362,14 @@ def test_a_target_seen_beyond_the_depth_range_is_walked_towards_until_it_maps(en
     # The same pixels with depth are an ordinary candidate: nothing to walk towards blindly.
     agent.reset(episode)
     assert agent.act(dataclasses.replace(obs, semantic=semantic)).goal_kind != "glimpse"
+
+
+def test_looking_settings_are_checked_with_one_line_errors(env):
+    with pytest.raises(L3MVNError, match="half the turn angle"):
+        MapAgent(NearestFrontier(), env.categories, env.cfg, AgentConfig(look_tolerance_deg=10.0))
+    with pytest.raises(L3MVNError, match="frontier_press_m"):
+        AgentConfig(frontier_press_m=0.8)
+    with pytest.raises(L3MVNError, match="viewpoint distances"):
+        AgentConfig(viewpoint_min_m=2.0, viewpoint_max_m=1.5)
+    with pytest.raises(L3MVNError, match="glimpse fractions"):
+        AgentConfig(glimpse_min_fraction=0.1, glimpse_max_fraction=0.05)
