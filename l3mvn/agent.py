@@ -20,6 +20,7 @@ from l3mvn.config import SimConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.events import Decision
 from l3mvn.frontiers import Frontier, FrontierConfig, extract_frontiers
+from l3mvn.looking import distance_to, far_sighting, look_goal, mask_centre, pick_viewpoint, turn_towards, unknown_near
 from l3mvn.mapping import CameraIntrinsics, MapConfig, SemanticMap, SemanticMapper
 from l3mvn.mapping.projection import downsample_frame
 from l3mvn.perception import SegmentationNoise
@@ -261,7 +262,7 @@ class MapAgent:
             retries += 1
         if kind == "viewpoint" and (plan.reached or not plan.reachable or self._stalled(goal, plan)):
             # At the other pose (or it cannot be reached): face the sighting, then approach it again.
-            turn = self._look_turn(sem_map, _centre(target))
+            turn = self._turn_towards(sem_map, mask_centre(target))
             if turn is None or not plan.reachable:
                 self._viewpoint = None
                 goal, kind = target, "candidate"
@@ -269,7 +270,7 @@ class MapAgent:
             else:
                 plan = replace(plan, action=turn, reached=False)
         elif kind == "candidate" and plan.reached:
-            turn = self._look_turn(sem_map, _centre(target))
+            turn = self._turn_towards(sem_map, mask_centre(target))
             if turn is not None:
                 plan = replace(plan, action=turn, reached=False)
                 reason = f"{reason}; turning to look at it"
@@ -315,7 +316,7 @@ class MapAgent:
             self._since_select = math.inf
         self._since_select += 1
         self._steps += 1
-        return self._decide(obs, action, sem_map, goal if isinstance(goal, tuple) else _centre(goal), kind,
+        return self._decide(obs, action, sem_map, goal if isinstance(goal, tuple) else mask_centre(goal), kind,
                             reason, t, plan.short_term_goal, override,
                             extra_ms={"frontiers": frontiers_ms, "policy": policy_ms})
 
@@ -383,8 +384,8 @@ class MapAgent:
         a bathroom read as reached from 0.75 m beside it, its frontier was blocked for good, and
         the toilet behind was never seen (Stockman)."""
         # The unknown the goal borders, within half the radius a done goal blocks.
-        beyond = _unknown_near(sem_map, goal, self.cfg.blocked_radius_m / sem_map.resolution_m / 2)
-        turn = self._look_turn(sem_map, goal if beyond is None else beyond)
+        beyond = unknown_near(sem_map, goal, self.cfg.blocked_radius_m / sem_map.resolution_m / 2)
+        turn = self._turn_towards(sem_map, goal if beyond is None else beyond)
         if turn is not None:
             return replace(plan, action=turn, reached=False), f"{reason}; turning to look at it"
         if kind == "frontier" and beyond is not None and self._pressing != goal:
@@ -394,67 +395,32 @@ class MapAgent:
                 return pressed, f"{reason}; still unknown beyond it: walking up to it"
         return plan, reason
 
-    def _look_turn(self, sem_map: SemanticMap, cell: tuple[int, int]) -> Action | None:
-        """The turn towards ``cell``, or None when it already lies within the look tolerance."""
-        r, c = sem_map.agent_cell
-        if (r, c) == tuple(cell):
-            return None
-        off = (math.atan2(cell[0] - r, cell[1] - c) - sem_map.agent_heading + math.pi) % (2 * math.pi) - math.pi
-        if abs(off) <= math.radians(self.cfg.look_tolerance_deg):
-            return None
-        return Action.TURN_LEFT if off > 0 else Action.TURN_RIGHT
+    def _turn_towards(self, sem_map: SemanticMap, cell: tuple[int, int]) -> Action | None:
+        return turn_towards(sem_map, cell, math.radians(self.cfg.look_tolerance_deg))
 
     def _pick_viewpoint(self, sem_map: SemanticMap, target: np.ndarray) -> tuple[int, int] | None:
-        """A reachable cell ``viewpoint_min_m``-``viewpoint_max_m`` from the glimpsed target, seen from
-        the side most unlike the views so far (a slit or a depth gap rarely repeats from there)."""
+        """Another pose to look at a glimpsed target from (``looking.pick_viewpoint``); the view from
+        here is remembered so the next one differs from it too."""
         res = sem_map.resolution_m
-        centre = np.array(_centre(target))
-        d = _distance_to(target, self.cfg.viewpoint_max_m / res + 1)
-        ring = (d >= self.cfg.viewpoint_min_m / res) & (d <= self.cfg.viewpoint_max_m / res) & sem_map.explored
-        if not ring.any():
+        found = pick_viewpoint(sem_map, target, self.planner, self._views, self.cfg.viewpoint_min_m / res,
+                               self.cfg.viewpoint_max_m / res)
+        if found is None:
             return None
-        field_ = self.planner.distance_from_agent(sem_map.obstacle, sem_map.agent_cell, targets=ring).full()
-        cells = np.argwhere(ring & np.isfinite(field_))
-        if len(cells) == 0:
-            return None
-        agent = np.array(sem_map.agent_cell)
-        self._views.append(math.atan2(*(agent - centre)))  # the view from here, as atan2(dr, dc)
-        bearings = np.arctan2(cells[:, 0] - centre[0], cells[:, 1] - centre[1])
-        seen = np.array(self._views)
-        gap = np.abs((bearings[:, None] - seen[None, :] + np.pi) % (2 * np.pi) - np.pi).min(axis=1)
-        best = np.lexsort((field_[cells[:, 0], cells[:, 1]], -np.round(gap, 1)))[0]
-        return int(cells[best, 0]), int(cells[best, 1])
+        self._views.append(found[1])
+        return found[0]
 
     def _look_goal(self, sem_map: SemanticMap) -> tuple[int, int] | None:
-        """The nearest reachable cell of the areas explored only from afar (each at least
-        ``look_min_area_m2``, away from goals already done), or None."""
-        glimpsed = sem_map.explored & ~sem_map.looked & ~sem_map.obstacle
-        rows, cols = np.flatnonzero(glimpsed.any(axis=1)), np.flatnonzero(glimpsed.any(axis=0))
-        if len(rows) == 0:
+        return look_goal(sem_map, self.planner, self._blocked, self.cfg.blocked_radius_m / sem_map.resolution_m,
+                         self.cfg.look_min_area_m2)
+
+    def _far_sighting(self, sem_map: SemanticMap) -> tuple[int, int] | None:
+        if self.goal not in self.categories:
             return None
-        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
-        crop = glimpsed[r0:r1, c0:c1].astype(np.uint8)
-        _, labels, stats, _ = cv2.connectedComponentsWithStats(crop, connectivity=8)
-        big = np.flatnonzero(stats[:, cv2.CC_STAT_AREA] * sem_map.resolution_m**2 >= self.cfg.look_min_area_m2)
-        big = big[big > 0]
-        if len(big) == 0:
-            return None
-        areas = np.zeros_like(glimpsed)
-        areas[r0:r1, c0:c1] = np.isin(labels, big)
-        if self._blocked:
-            done = np.zeros(areas.shape, np.uint8)
-            for br, bc in self._blocked:
-                cv2.circle(done, (int(bc), int(br)), int(self.cfg.blocked_radius_m / sem_map.resolution_m), 1, -1)
-            areas &= done == 0
-            if not areas.any():
-                return None
-        field_ = self.planner.distance_from_agent(sem_map.obstacle, sem_map.agent_cell, targets=areas).full()
-        field_ = np.where(areas, field_, np.inf)
-        best = int(np.argmin(field_))
-        if not np.isfinite(field_.flat[best]):
-            return None
-        r, c = np.unravel_index(best, field_.shape)
-        return int(r), int(c)
+        depth, semantic = self._frame
+        return far_sighting(sem_map, depth, semantic, self.categories.index(self.goal) + 1,
+                            self._mapper.intrinsics.focal_px, self.cfg.map.max_depth_m / sem_map.resolution_m,
+                            (self.cfg.glimpse_min_fraction, self.cfg.glimpse_max_fraction), self._blocked,
+                            self.cfg.blocked_radius_m / sem_map.resolution_m)
 
     def _start_escape(self) -> None:
         self.planner.clear_collisions()
@@ -476,30 +442,6 @@ class MapAgent:
             self._frame_shape = depth.shape
         self._frame = (depth, semantic)
         return self._mapper.update(depth, semantic, obs.pose, obs.tilt)
-
-    def _far_sighting(self, sem_map: SemanticMap) -> tuple[int, int] | None:
-        """The map cell at the depth range along the bearing of goal pixels that have no depth (seen
-        beyond the range), when they fill between the glimpse fractions of the frame and do not
-        point at a goal already done; else None."""
-        depth, semantic = self._frame
-        if self.goal not in self.categories:
-            return None
-        far = (semantic == self.categories.index(self.goal) + 1) & (depth <= 0)
-        share = np.count_nonzero(far) / far.size
-        if not self.cfg.glimpse_min_fraction <= share <= self.cfg.glimpse_max_fraction:
-            return None
-        width = far.shape[1]
-        focal = (width / 2.0) / math.tan(math.radians(self.sim.hfov_deg) / 2.0)
-        column = float(np.nonzero(far)[1].mean()) + 0.5
-        bearing = sem_map.agent_heading - math.atan((column - width / 2.0) / focal)  # right is clockwise
-        reach = self.cfg.map.max_depth_m / sem_map.resolution_m
-        r = int(round(sem_map.agent_cell[0] + reach * math.sin(bearing)))
-        c = int(round(sem_map.agent_cell[1] + reach * math.cos(bearing)))
-        r, c = min(max(r, 0), sem_map.size - 1), min(max(c, 0), sem_map.size - 1)
-        radius = self.cfg.blocked_radius_m / sem_map.resolution_m
-        if any(math.hypot(r - br, c - bc) <= radius for br, bc in self._blocked):
-            return None
-        return r, c
 
     def _target_mask(self, sem_map: SemanticMap) -> tuple[np.ndarray | None, bool]:
         """The largest connected blob of the goal channel (rejected cells aside) and whether it has
@@ -602,32 +544,4 @@ def _straight_m(sem_map: SemanticMap, mask: np.ndarray) -> float:
 
 def _within(mask: np.ndarray, radius_cells: float) -> np.ndarray:
     """Cells whose centre lies within ``radius_cells`` (straight line) of a cell of ``mask``."""
-    return _distance_to(mask, radius_cells) <= radius_cells
-
-
-def _unknown_near(sem_map: SemanticMap, cell: tuple[int, int], radius_cells: float) -> tuple[int, int] | None:
-    """Centroid of the unexplored cells within ``radius_cells`` of ``cell``, or None."""
-    r, c, k = int(cell[0]), int(cell[1]), int(math.ceil(radius_cells))
-    r0, c0 = max(r - k, 0), max(c - k, 0)
-    win = ~sem_map.explored[r0 : r + k + 1, c0 : c + k + 1]
-    rows, cols = np.nonzero(win)
-    near = (rows + r0 - r) ** 2 + (cols + c0 - c) ** 2 <= radius_cells**2
-    if not near.any():
-        return None
-    return int(round(rows[near].mean())) + r0, int(round(cols[near].mean())) + c0
-
-
-def _distance_to(mask: np.ndarray, limit_cells: float) -> np.ndarray:
-    """Straight-line distance (cells) to the nearest cell of ``mask``, inf beyond ``limit_cells``."""
-    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-    pad = int(math.ceil(limit_cells)) + 1
-    r0, c0 = max(rows[0] - pad, 0), max(cols[0] - pad, 0)
-    r1, c1 = min(rows[-1] + pad + 1, mask.shape[0]), min(cols[-1] + pad + 1, mask.shape[1])
-    out = np.full(mask.shape, np.inf, dtype=np.float32)
-    out[r0:r1, c0:c1] = cv2.distanceTransform((~mask[r0:r1, c0:c1]).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    return out
-
-
-def _centre(mask: np.ndarray) -> tuple[int, int]:
-    rows, cols = np.nonzero(mask)
-    return int(np.median(rows)), int(np.median(cols))
+    return distance_to(mask, radius_cells) <= radius_cells
