@@ -17,6 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from l3mvn.errors import L3MVNError  # noqa: E402
 from l3mvn.eval.failures import CLASSES, failure_table  # noqa: E402
 
 
@@ -25,12 +26,19 @@ def main() -> int:
     ap.add_argument("audit", help="audit.json written by `l3mvn scenes audit --out DIR`")
     ap.add_argument("results", nargs="+", help="result lines of `l3mvn eval --out`")
     args = ap.parse_args()
-    audits = {e["key"]: e for e in json.loads(Path(args.audit).read_text())["episodes"]}
+    report = json.loads(Path(args.audit).read_text())
+    if not isinstance(report, dict) or not report.get("episodes"):
+        raise SystemExit(f"error: {args.audit} holds no audited episodes: run `l3mvn scenes audit --out DIR` "
+                         "on a dataset split with episode files")
+    audits = {e["key"]: e for e in report["episodes"]}
     columns = []
     for path in args.results:
         rows = [r for line in Path(path).read_text().splitlines() if line.strip()
                 if "error" not in (r := json.loads(line))]
-        table = failure_table(rows, audits)
+        try:
+            table = failure_table(rows, audits)
+        except L3MVNError as exc:
+            raise SystemExit(f"error: {path}: {exc}") from None
         sr = sum(r["success"] for r in rows) / max(len(rows), 1)
         columns.append((Path(path).stem, len(rows), sr, table))
     width = max(len(c) for c in CLASSES) + 2

@@ -108,6 +108,14 @@ class AgentConfig:
         if not 0 < self.viewpoint_min_m < self.viewpoint_max_m:
             raise L3MVNError("viewpoint distances must satisfy 0 < viewpoint_min_m < viewpoint_max_m")
 
+    def downsample_factor(self, height: int, width: int) -> int:
+        """The stride frames of this size are mapped at (SemExp: 480x640 -> 120x160 with 4)."""
+        factor = max(1, height // self.map_input_height)
+        if height % factor or width % factor:
+            raise L3MVNError(f"frame {height}x{width} is not divisible by the mapper's downsample factor {factor} "
+                             f"(height // {self.map_input_height}): choose e.g. 480x640 or 120x160")
+        return factor
+
 
 _EXPLORING = ("frontier", "random", "explore", "look")
 
@@ -431,8 +439,7 @@ class MapAgent:
         self._escape = moves[::-1]  # popped from the end
 
     def _update_map(self, obs: Observation) -> SemanticMap:
-        h, w = obs.depth.shape
-        factor = max(1, h // self.cfg.map_input_height)
+        factor = self.cfg.downsample_factor(*obs.depth.shape)
         depth, semantic = (obs.depth, obs.semantic) if factor == 1 else downsample_frame(obs.depth, obs.semantic, factor)
         semantic = self.noise(semantic)
         if self._mapper is None or self._frame_shape != depth.shape:

@@ -11,7 +11,7 @@ import math
 import sys
 from pathlib import Path
 
-from l3mvn.config import SimConfig, override
+from l3mvn.config import SUCCESS_RULES, SimConfig, override
 from l3mvn.errors import L3MVNError
 
 
@@ -36,7 +36,7 @@ def _positive(text: str) -> int:
 
 
 def _add_sim_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--rule", choices=["semexp", "geodesic"], default="semexp",
+    p.add_argument("--rule", choices=SUCCESS_RULES, default="semexp",
                    help="success rule (default: SemExp's Gibson rule, as in the paper's table)")
     p.add_argument("--frame", type=_frame, default=None, metavar="HxW",
                    help="render size (default 480x640; 120x160 is what the mapper consumes)")
@@ -91,7 +91,7 @@ def build_parser() -> argparse.ArgumentParser:
     sc.add_argument("action", nargs="?", choices=["list", "audit"], default="list",
                     help="list (default), or audit: can every goal object be confirmed from its success region")
     _add_source_args(sc)
-    sc.add_argument("--rule", choices=["semexp", "geodesic"], default="semexp", help="audit: success rule")
+    sc.add_argument("--rule", choices=SUCCESS_RULES, default="semexp", help="audit: success rule")
     sc.add_argument("--frame", default=None, metavar="HxW", help="audit: render size (default 480x640)")
     sc.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="audit: override a SimConfig field")
@@ -204,7 +204,8 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 
 def _cmd_audit(args: argparse.Namespace) -> int:
-    from l3mvn.eval.audit import audit_scenes, downsample_factor, format_report, load_split_for_audit
+    from l3mvn.agent import AgentConfig
+    from l3mvn.eval.audit import audit_scenes, format_report, load_split_for_audit
 
     cfg = SimConfig(success_rule=args.rule)
     if args.frame is not None:
@@ -213,7 +214,7 @@ def _cmd_audit(args: argparse.Namespace) -> int:
         except argparse.ArgumentTypeError as exc:
             raise L3MVNError(f"--frame: {exc}") from None
     cfg = override(cfg, args.set)
-    downsample_factor(cfg)
+    AgentConfig().downsample_factor(cfg.frame_height, cfg.frame_width)
     if args.dataset is None:
         source, split, episodes = "procedural", "-", []
         _, scenes = _scenes(args)

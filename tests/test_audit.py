@@ -166,4 +166,5 @@ def test_every_dev_goal_instance_is_confirmable_or_has_a_reason():
             assert inst.reason is None and inst.nearest_confirmable_m <= CFG.success_distance_m, inst
         else:
             assert inst.reason in REASONS, inst
-    assert sum(i.confirmable for i in insts) > 0.9 * len(insts)
+    # The world builder erases, buries and hides none of them: what is left lacks floor or a path.
+    assert {i.reason for i in insts if not i.confirmable} <= {"no_floor", "unreachable"}

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import pytest
+
+from l3mvn.errors import L3MVNError
 from l3mvn.eval.failures import CLASSES, classify_failure, failure_table
 
 
@@ -31,6 +34,12 @@ def test_a_confirmable_goal_is_charged_to_the_agent_by_what_it_did():
 
 def test_the_table_counts_failures_only_and_every_class_is_listed():
     rows = [_row("A/0/1", "success"), _row("A/0/2", "stuck"), _row("A/0/3", "stuck")]
-    table = failure_table(rows, {"A/0/3": _audit("A/0/3", False, "occluded")})
+    audits = {"A/0/2": _audit("A/0/2", True), "A/0/3": _audit("A/0/3", False, "occluded")}
+    table = failure_table(rows, audits)
     assert table == {"agent: stuck": 1, "world: hidden": 1}
     assert set(table) <= set(CLASSES)
+
+
+def test_a_failure_the_audit_never_saw_is_an_error_not_the_agents():
+    with pytest.raises(L3MVNError, match="no record of 1 failed episode"):
+        failure_table([_row("A/0/1", "success"), _row("B/0/2", "stuck")], {})

@@ -348,31 +348,3 @@ def test_turn_cost_makes_the_frontier_ahead_cheaper_than_an_equally_near_one_beh
     assert by_side[90].cost == pytest.approx(by_side[90].distance_m)
     assert by_side[10].cost == pytest.approx(by_side[10].distance_m + 0.5 * np.pi, abs=0.05)
     assert facing_right[0].center[1] == 90
-
-
-def _house_with_unseen_side_room(hole: tuple[slice, slice]) -> tuple[np.ndarray, np.ndarray]:
-    """A closed hall (rows 5..75, cols 5..115) whose unexplored pocket ``hole`` is walled except for
-    an 11-cell door in its bottom wall: a side room whose walls were all mapped from outside."""
-    explored, obstacle = room((80, 120), 5, 5, 75, 115)
-    rows, cols = hole
-    explored[rows, cols] = False
-    r0, r1, c0, c1 = rows.start - 1, rows.stop, cols.start - 1, cols.stop
-    obstacle[r0, c0 : c1 + 1] = obstacle[r1, c0 : c1 + 1] = True
-    obstacle[r0 : r1 + 1, c0] = obstacle[r0 : r1 + 1, c1] = True
-    mid = (c0 + c1) // 2
-    obstacle[r1, mid - 5 : mid + 6] = False
-    return explored, obstacle
-
-
-def test_a_room_sized_hole_seen_only_from_outside_has_a_frontier_at_its_door():
-    explored, obstacle = _house_with_unseen_side_room((slice(20, 45), slice(40, 80)))  # 25 x 40 cells: 2.5 m2
-    frontiers = extract(explored, obstacle, (65, 20), FrontierConfig(min_hole_m2=0.75))
-    assert len(frontiers) == 1
-    rows, cols = frontiers[0].cells.T
-    assert (rows == 45).all() and cols.min() >= 55 and cols.max() <= 65  # the door, nothing else
-    assert extract(explored, obstacle, (65, 20)) == []  # the paper's outer contour only (default)
-
-
-def test_a_depth_gap_smaller_than_a_room_is_not_a_frontier():
-    explored, obstacle = _house_with_unseen_side_room((slice(30, 40), slice(50, 65)))  # 10 x 15 cells: 0.375 m2
-    assert extract(explored, obstacle, (65, 20), FrontierConfig(min_hole_m2=0.75)) == []

@@ -191,17 +191,6 @@ class _Look:
     rgb: np.ndarray | None = None
 
 
-def downsample_factor(cfg: SimConfig, agent: AgentConfig | None = None) -> int:
-    """The factor ``MapAgent._update_map`` downsamples frames of this size by; an error if it cannot."""
-    agent = agent or AgentConfig()
-    h, w = cfg.frame_height, cfg.frame_width
-    factor = max(1, h // agent.map_input_height)
-    if h % factor or w % factor:
-        raise L3MVNError(f"frame {h}x{w} is not divisible by the mapper's downsample factor {factor} "
-                         f"(height // {agent.map_input_height}): choose e.g. 480x640 or 120x160")
-    return factor
-
-
 class FloorAuditor:
     """Audits the goal instances of one floor; renderer, mapper and agent rule built once and reused."""
 
@@ -215,7 +204,7 @@ class FloorAuditor:
         self.renderer = BuiltinSimulator(scene, self.cfg).renderer if world is None else Renderer(world, self.cfg)
         h, w = self.cfg.frame_height, self.cfg.frame_width
         # Exactly MapAgent._update_map's mapper: same config, intrinsics of the downsampled frame.
-        self.factor = downsample_factor(self.cfg, self.agent_cfg)
+        self.factor = self.agent_cfg.downsample_factor(h, w)
         self.full_intr = CameraIntrinsics.from_sim(self.cfg, h, w)
         self.mapper = SemanticMapper(self.agent_cfg.map, CameraIntrinsics.from_sim(
             self.cfg, h // self.factor, w // self.factor), scene.categories)
@@ -484,7 +473,7 @@ def audit_scenes(scenes: dict[str, dict[int, SceneMap]], cfg: SimConfig | None =
     cfg = cfg or SimConfig()
     if workers < 1:
         raise L3MVNError(f"workers must be >= 1, got {workers}")
-    downsample_factor(cfg)
+    AgentConfig().downsample_factor(cfg.frame_height, cfg.frame_width)
     t0 = time.perf_counter()
     floors = sorted((s for fl in scenes.values() for s in fl.values()), key=lambda s: -s.navigable.size)
     jobs = [(s, cfg, [e for e in episodes or () if (e.scene, e.floor) == (s.name, s.floor)], audit,
@@ -668,6 +657,6 @@ def _json_safe(obj):
 
 __all__ = [
     "REASONS", "AuditConfig", "InstanceAudit", "EpisodeAudit", "FloorAudit", "AuditReport", "FloorAuditor",
-    "audit_floor", "audit_scenes", "audit_split", "load_split_for_audit", "downsample_factor", "format_report",
+    "audit_floor", "audit_scenes", "audit_split", "load_split_for_audit", "format_report",
     "write_diagnostic_png",
 ]

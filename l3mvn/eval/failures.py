@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from collections import Counter
 
+from l3mvn.errors import L3MVNError
+
 # World: the floor the success rule counts is missing, no path leads to it, or the goal never maps
 # to enough cells from there. Audit reasons map onto these three.
 WORLD_CAUSES = {
@@ -49,5 +51,11 @@ def classify_failure(row: dict, audit: dict | None) -> str | None:
 
 
 def failure_table(rows: list[dict], audits: dict[str, dict]) -> Counter:
-    """Counts per class over the failed lines of ``rows``; ``audits`` maps episode keys to records."""
-    return Counter(c for r in rows if (c := classify_failure(r, audits.get(r["key"]))) is not None)
+    """Counts per class over the failed lines of ``rows``; ``audits`` maps episode keys to records.
+    A failure the audit has no record of is an error, not an agent failure: the audit was run on
+    another dataset or without its episode files."""
+    missing = [r["key"] for r in rows if not r.get("success") and r["key"] not in audits]
+    if missing:
+        raise L3MVNError(f"the audit has no record of {len(missing)} failed episode(s), e.g. {missing[0]}: "
+                         "audit the same dataset and split, with its episode files")
+    return Counter(classify_failure(r, audits[r["key"]]) for r in rows if not r.get("success"))

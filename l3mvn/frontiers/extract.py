@@ -5,8 +5,7 @@
    sparse depth, a room glimpsed through a gap): usually noise, or space the agent reaches through the
    main blob's own frontier anyway; ``edge="all"`` keeps them and lets the geodesic filter drop the
    unreachable ones. Holes inside the explored blob are not frontiers: they are mostly depth gaps, not
-   unexplored rooms, except holes of at least ``min_hole_m2``: a small room whose walls were all
-   mapped from outside, entered by a door the agent has only seen. Cells on the outermost frame of the array are not frontiers either: the map
+   unexplored rooms. Cells on the outermost frame of the array are not frontiers either: the map
    cannot record what lies beyond it (the authors' code clears the frame too).
 2. Frontier = explored edge minus obstacles dilated by a square of ``obstacle_dilation_cells``.
 3. 8-connected clusters; drop those under ``min_cluster_cells``, unreachable, nearer than
@@ -78,8 +77,7 @@ def extract_frontiers(
     if box is None:
         return []
     r0, r1, c0, c1 = box
-    min_hole_cells = cfg.min_hole_m2 / cfg.resolution_m**2
-    frontier = _explored_edge(explored[r0:r1, c0:c1], cfg.edge, min_hole_cells)
+    frontier = _explored_edge(explored[r0:r1, c0:c1], cfg.edge)
     if cfg.obstacle_dilation_cells > 0:
         size = 2 * cfg.obstacle_dilation_cells + 1
         kernel = np.ones((size, size), np.uint8)
@@ -185,20 +183,16 @@ def _crop_box(explored: np.ndarray, margin: int) -> tuple[int, int, int, int] | 
     )
 
 
-def _explored_edge(explored: np.ndarray, mode: str, min_hole_cells: float = np.inf) -> np.ndarray:
-    """Cells on the outer contour(s) of the explored blobs and on their holes of at least
-    ``min_hole_cells`` (``cv2.contourArea`` measures a hole's inside)."""
+def _explored_edge(explored: np.ndarray, mode: str) -> np.ndarray:
+    """Cells on the outer contour(s) of the explored blobs."""
     padded = cv2.copyMakeBorder(explored.view(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
-    contours, hierarchy = cv2.findContours(padded, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    contours, _ = cv2.findContours(padded, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     edge = np.zeros(explored.shape, dtype=bool)
     if not contours:
         return edge
-    parent = hierarchy[0, :, 3]
-    outer = np.flatnonzero(parent < 0)
     if mode == "largest":
-        outer = outer[[int(np.argmax([cv2.contourArea(contours[i]) for i in outer]))]]
-    holes = [i for i in np.flatnonzero(np.isin(parent, outer)) if cv2.contourArea(contours[i]) >= min_hole_cells]
-    points = np.concatenate([contours[i].reshape(-1, 2) for i in [*outer, *holes]])
+        contours = [max(contours, key=cv2.contourArea)]
+    points = np.concatenate([c.reshape(-1, 2) for c in contours])
     edge[points[:, 1] - 1, points[:, 0] - 1] = True
     return edge
 

@@ -48,11 +48,6 @@ class FrontierConfig:
     resolution_m: float = 0.05
     # Cost of turning to face a frontier, metres per radian (0: the paper's pure geodesic cost).
     turn_cost_m_per_rad: float = 0.0
-    # Unexplored holes inside the explored blob at least this large count as rooms, not depth gaps:
-    # a bathroom whose walls were all mapped from outside is such a hole, and with outer contours only
-    # the door into it is never a frontier. Default inf: outer contours only (the paper); 0.75 m2 cost
-    # oracle-frontier 0.945 -> 0.930 SR on the dev houses (3 episodes lost, none gained).
-    min_hole_m2: float = float("inf")
 
     def __post_init__(self) -> None:
         if self.utility not in UTILITY_MODES:
@@ -72,8 +67,6 @@ class FrontierConfig:
             )
         if self.top_k is not None and self.top_k < 1:
             raise L3MVNError(f"top_k must be >= 1 or None (keep all), got {self.top_k}")
-        if not self.min_hole_m2 > 0:
-            raise L3MVNError(f"min_hole_m2 must be positive (inf: no holes), got {self.min_hole_m2}")
         for name in ("cu_lambda", "near_bonus", "near_bonus_m", "window_m", "turn_cost_m_per_rad"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):

@@ -12,7 +12,6 @@ import math
 import zlib
 
 import numpy as np
-
 from scipy import ndimage as ndi
 
 from l3mvn.eval.geodesic import GoalRegion, geodesic_field
@@ -86,7 +85,7 @@ def object_distances(env: BuiltinSimulator, goal: str) -> GoalRegion:
     up to the success distance at which the instance has floor), as a GoalRegion for its lookups."""
     scene = env.scene
     res = scene.resolution_m
-    labels, n = ndi.label(scene.category_mask(goal), structure=np.ones((3, 3), dtype=bool))
+    labels, _ = ndi.label(scene.category_mask(goal), structure=np.ones((3, 3), dtype=bool))
     trav = scene.traversible
     first = math.ceil(env.cfg.agent_radius_m / res) + 1
     last = max(first, math.ceil(env.cfg.success_distance_m / res))
