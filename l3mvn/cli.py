@@ -312,7 +312,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         rows = run_ray(job, todo, args.address, args.workers)
     else:
         rows = run_local(job, todo, args.workers or 1)
-    errors = 0
+    errors, interrupted = 0, False
     writer = ResultWriter(args.out)
     try:
         with closing(rows), _progress(len(todo)) as bar:
@@ -327,18 +327,25 @@ def _cmd_eval(args: argparse.Namespace) -> int:
                 done = list(results.values())
                 bar.set_postfix_str(f"SR {sum(r['success'] for r in done) / len(done):.3f} "
                                     f"SPL {sum(r['spl'] or 0 for r in done) / len(done):.3f}")
+    except KeyboardInterrupt:
+        interrupted = True  # the episodes finished so far still get their summary
     finally:
         writer.close()
     if errors:
         print(f"{errors} episodes failed (error rows in {args.out or 'the log above'}; --resume retries them)",
               file=sys.stderr)
     if not results:
+        if interrupted:
+            raise KeyboardInterrupt
         raise L3MVNError("no episodes were run")
+    if interrupted:
+        print(f"interrupted: summary of the {len(results)} of {len(episodes)} episodes finished "
+              f"(saved in {args.out or 'no file: add --out'}; --resume runs the rest)", file=sys.stderr)
     summary = summarize(list(results.values()))
     print(format_summary(summary))
     if args.json:
         print(json.dumps(_json_safe(summary), sort_keys=True))
-    return 0
+    return 130 if interrupted else 0
 
 
 def _progress(total: int):

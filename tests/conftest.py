@@ -63,5 +63,23 @@ def tiny_dataset(tmp_path: Path) -> Path:
     return tmp_path
 
 
+@pytest.fixture
+def shut_dataset(tmp_path: Path) -> Path:
+    """The two-room house with its door walled up after episodes were drawn: of its 6 episodes, the
+    ones starting in the room without their goal (ids 0-4) have no path; id 5 starts beside it."""
+    from l3mvn.episodes import episode_file, generate_episodes, write_episode_file
+    from l3mvn.scenes.semexp import save_split
+
+    house = draw_two_room_house("Shut")
+    episodes = generate_episodes(house, 6, seed=1, goals=("toilet", "bed"))
+    navigable = house.navigable.copy()
+    navigable[:, 93:107] = False
+    shut = SceneMap(name="Shut", floor=0, categories=house.categories, navigable=navigable, objects=house.objects,
+                    origin_cm=house.origin_cm, floor_height_m=0.0)
+    save_split(tmp_path, "val", [shut])
+    write_episode_file(episode_file(tmp_path, "val", "Shut"), episodes, {0: shut})
+    return tmp_path
+
+
 needs_gibson = pytest.mark.skipif(not (GIBSON / "train" / "train_info.pbz2").exists(),
                                   reason="../shared Gibson maps not present")

@@ -85,3 +85,24 @@ def test_generated_procedural_episodes_form_a_semexp_dataset(tmp_path, capsys):
     assert main(["eval", "--dataset", str(tmp_path), "--split", "val", "--policy", "oracle",
                  "--frame", "48x64", "--json"]) == 0
     assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["episodes"] == 3
+
+
+def test_an_interrupted_eval_still_summarises_what_finished(tiny_dataset, tmp_path, capsys, monkeypatch):
+    import l3mvn.eval.backends as backends
+
+    real = backends.run_local
+
+    def two_then_ctrl_c(job, keys, workers):
+        rows = real(job, keys, workers)
+        yield next(rows)
+        yield next(rows)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(backends, "run_local", two_then_ctrl_c)
+    out = tmp_path / "results.jsonl"
+    assert main(["eval", "--dataset", str(tiny_dataset), "--split", "val", "--policy", "oracle",
+                 "--frame", "60x80", "--out", str(out), "--json"]) == 130
+    captured = capsys.readouterr()
+    assert json.loads(captured.out.strip().splitlines()[-1])["episodes"] == 2
+    assert "summary of the 2 of 8 episodes finished" in captured.err
+    assert len(out.read_text().splitlines()) == 2

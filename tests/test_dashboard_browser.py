@@ -1,6 +1,7 @@
 """End to end in a real browser (Debian's chromium driven by playwright): press, look, click.
 
-Skips when playwright or /usr/bin/chromium is missing. Set L3MVN_SCREENSHOTS=DIR to keep screenshots.
+Skips when playwright or a chromium is missing (Debian's ``chromium`` package, or the one
+``playwright install chromium`` downloads). Set L3MVN_SCREENSHOTS=DIR to keep screenshots.
 """
 
 from __future__ import annotations
@@ -8,6 +9,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import shutil
 import socket
 import time
 from pathlib import Path
@@ -15,8 +17,24 @@ from pathlib import Path
 import pytest
 
 sync_api = pytest.importorskip("playwright.sync_api")
-CHROMIUM = Path("/usr/bin/chromium")
-pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason="no /usr/bin/chromium installed")
+
+
+def _find_chromium() -> Path | None:
+    """The system's chromium, else playwright's own download (None when neither is there)."""
+    for name in ("chromium", "chromium-browser"):
+        if found := shutil.which(name):
+            return Path(found)
+    try:
+        with sync_api.sync_playwright() as p:
+            bundled = Path(p.chromium.executable_path)
+    except Exception:  # playwright's driver cannot start here: treat as no browser
+        return None
+    return bundled if bundled.exists() else None
+
+
+CHROMIUM = _find_chromium()
+pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
+                                                         "`playwright install chromium` runs these tests")
 
 from app.server import start_dashboard  # noqa: E402
 from app.views import cell_to_xy  # noqa: E402

@@ -1,4 +1,6 @@
 import bz2
+import os
+import pathlib
 import pickle
 
 import numpy as np
@@ -49,6 +51,52 @@ def test_malformed_map_record_is_rejected(tmp_path):
         pickle.dump({"Bad": {0: {"sem_map": np.zeros((5, 5))}}}, fh)
     with pytest.raises(L3MVNError, match=r"sem_map must be \(channels, H, W\)"):
         load_split(tmp_path, "val")
+
+
+class _Payload:
+    """Pickles to "call this global with these arguments": what a crafted map file would hold."""
+
+    def __init__(self, fn, *args):
+        self.fn, self.args = fn, args
+
+    def __reduce__(self):
+        return self.fn, self.args
+
+
+def _write_info(tmp_path, raw) -> None:
+    (tmp_path / "val").mkdir(exist_ok=True)
+    with bz2.BZ2File(tmp_path / "val" / "val_info.pbz2", "wb") as fh:
+        pickle.dump(raw, fh)
+
+
+@pytest.mark.parametrize("payload", [
+    lambda marker: _Payload(os.system, f"touch {marker}"),
+    lambda marker: _Payload(eval, f"open({str(marker)!r}, 'w')"),
+    lambda marker: _Payload(pathlib.Path.touch, pathlib.Path(marker)),
+])
+def test_a_crafted_map_file_runs_nothing(tmp_path, payload):
+    marker = tmp_path / "pwned"
+    floor = {"sem_map": np.zeros((2, 4, 4)), "origin": payload(marker)}
+    _write_info(tmp_path, {"Evil": {0: floor}})
+    with pytest.raises(L3MVNError, match=r"val_info.pbz2 is not a SemExp map file \(refuses .*: a SemExp map holds"):
+        load_split(tmp_path, "val")
+    assert not marker.exists()
+
+
+def test_object_arrays_are_refused(tmp_path):
+    _write_info(tmp_path, {"Odd": {0: {"sem_map": np.array([None, 1], dtype=object)}}})
+    with pytest.raises(L3MVNError, match="object arrays are not part of the SemExp format"):
+        load_split(tmp_path, "val")
+
+
+def test_the_format_still_loads_all_its_types(tmp_path):
+    """Arrays of several dtypes, numpy scalars and plain numbers: what real SemExp files hold."""
+    sem = np.zeros((3, 6, 6), np.float32)
+    sem[0, 1:5, 1:5] = 1
+    _write_info(tmp_path, {"Ok": {0: {"sem_map": sem, "origin": np.array([10, 20], np.int64),
+                                      "floor_height": np.float64(0.25)}}})
+    floor = load_split(tmp_path, "val")["Ok"][0]
+    assert floor.origin_cm == (10.0, 20.0) and floor.floor_height_m == 0.25 and floor.navigable.sum() == 16
 
 
 @needs_gibson

@@ -42,6 +42,8 @@ def classify_failure(row: dict, audit: dict | None) -> str | None:
         reason = (audit.get("reason") or "hidden").split(",")[0].strip()
         return WORLD_CAUSES.get(reason, "world: hidden")
     cause = row["failure"]
+    if cause == "no_path":
+        return "world: object unreachable"
     if cause == "saw_target_not_reached":
         confirmed = row.get("extra", {}).get("confirmed")
         if confirmed is None:

@@ -20,6 +20,10 @@ FAILURE_CAUSES = (
     "saw_target_not_reached",  # saw it, never entered the success region
     "timeout",  # was in the success region at some point but never stopped there
     "stuck",  # ran out of steps while colliding most of the time
+    # The start has no path to the success region on the ground-truth floor: no agent can succeed.
+    # Scored as a failure (SR and SPL 0, DTG left out) and counted apart in the summary, so a
+    # dataset's infeasible episodes neither vanish from the denominator nor pass for agent failures.
+    "no_path",
 )
 
 
@@ -82,9 +86,11 @@ EXPLORED_COVERAGE = 0.9
 def score_episode(o: EpisodeOutcome) -> tuple[float, float, float, str]:
     """(success, spl, dtg, failure cause)."""
     success = 1.0 if (o.stopped and o.in_success_region) else 0.0
-    spl = success * o.shortest_path_m / max(o.shortest_path_m, o.path_length_m, 1e-9)
+    spl = o.shortest_path_m / max(o.shortest_path_m, o.path_length_m, 1e-9) if success else 0.0
     if success:
         cause = "success"
+    elif not math.isfinite(o.shortest_path_m):
+        cause = "no_path"
     elif o.stopped:
         cause = "false_stop"
     elif o.agent_reported_stuck or o.recent_collision_rate >= STUCK_COLLISION_RATE:
@@ -113,6 +119,7 @@ def summarize(results: list[dict], rule: str | None = None) -> dict:
         for goal in sorted({r["goal"] for r in results})
     }
     summary["failure_causes"] = dict(Counter(r["failure"] for r in results).most_common())
+    summary["no_path"] = summary["failure_causes"].get("no_path", 0)
     return summary
 
 
@@ -141,4 +148,7 @@ def format_summary(summary: dict) -> str:
     causes = summary.get("failure_causes", {})
     if causes:
         lines.append("failure causes: " + ", ".join(f"{k} {v}" for k, v in causes.items()))
+    if summary.get("no_path"):
+        lines.append(f"{summary['no_path']} episodes have no path from start to goal: scored as failures "
+                     "(SR and SPL 0), left out of DTG")
     return "\n".join(lines)

@@ -56,8 +56,10 @@ class OraclePolicy:
             v = self._value(end.x, end.y)
             if v < best_v - 1e-6:
                 best_k, best_v = k, v
+        if not math.isfinite(here):
+            return Action.STOP  # no path from here to the goal: walking cannot help
         if best_v >= here:
-            # No single move helps (a corner tighter than one step): fall back to the path direction.
+            # No single move helps (a corner tighter than one step): turn towards the path ahead.
             r, c = scene.cell_of(pose.x, pose.y)
             tx, ty = scene.cell_center(*self._descend(r, c))
             err = (math.atan2(ty - pose.y, tx - pose.x) - pose.heading + math.pi) % (2 * math.pi) - math.pi
@@ -65,6 +67,21 @@ class OraclePolicy:
         if best_k == 0:
             return Action.MOVE_FORWARD
         return Action.TURN_LEFT if best_k > 0 else Action.TURN_RIGHT
+
+    def _descend(self, r: int, c: int) -> tuple[int, int]:
+        """The cell ``lookahead_cells`` steps down the distance field from (r, c), following the
+        lowest neighbour (stops early at the region or a local minimum)."""
+        field = self._field
+        h, w = field.shape
+        for _ in range(self.lookahead_cells):
+            around = np.array([r, c]) + _NEIGHBOURS
+            around = around[(around[:, 0] >= 0) & (around[:, 0] < h) & (around[:, 1] >= 0) & (around[:, 1] < w)]
+            values = field[around[:, 0], around[:, 1]]
+            k = int(np.argmin(values))
+            if not values[k] < field[r, c]:
+                break
+            r, c = int(around[k, 0]), int(around[k, 1])
+        return r, c
 
     def _value(self, x: float, y: float) -> float:
         r, c = self.env.scene.cell_of(x, y)

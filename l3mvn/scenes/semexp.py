@@ -33,14 +33,55 @@ def info_path(dataset: str | Path, split: str) -> Path:
     return path
 
 
+def _plain_dtype(*args, **kwargs) -> np.dtype:
+    """``np.dtype`` for the unpickler, refusing object dtypes (their payload would be more pickles)."""
+    dtype = np.dtype(*args, **kwargs)
+    if dtype.hasobject:
+        raise pickle.UnpicklingError("object arrays are not part of the SemExp format")
+    return dtype
+
+
+# The only globals a SemExp ``.pbz2`` names: dicts, lists, numbers and strings need none, and numpy
+# arrays need these three (under ``numpy.core`` or, when written by numpy 2, ``numpy._core``).
+_FORMAT_GLOBALS = {
+    **{(mod, "_reconstruct"): np.ndarray.__reduce__(np.zeros(0))[0]
+       for mod in ("numpy.core.multiarray", "numpy._core.multiarray")},
+    **{(mod, "scalar"): np.float64(0).__reduce__()[0] for mod in ("numpy.core.multiarray", "numpy._core.multiarray")},
+    ("numpy", "ndarray"): np.ndarray,
+    ("numpy", "dtype"): _plain_dtype,
+}
+
+
+class _FormatUnpickler(pickle.Unpickler):
+    """Unpickles only what the format holds, so a crafted map file cannot run code.
+
+    ``pickle.load`` imports and calls any global a file names (``os.system`` included); these files
+    are downloaded from third-party mirrors, so anything outside ``_FORMAT_GLOBALS`` is refused.
+    """
+
+    def find_class(self, module: str, name: str):
+        try:
+            return _FORMAT_GLOBALS[(module, name)]
+        except KeyError:
+            raise pickle.UnpicklingError(
+                f"refuses {module}.{name}: a SemExp map holds only dicts, numbers and numpy arrays") from None
+
+
+def read_info(path: Path) -> object:
+    """The raw ``{scene: {floor: record}}`` of a ``.pbz2`` file, read without executing anything."""
+    try:
+        with bz2.BZ2File(path) as fh:
+            return _FormatUnpickler(fh).load()
+    except pickle.UnpicklingError as exc:
+        raise L3MVNError(f"{path} is not a SemExp map file ({exc})") from None
+    except (OSError, EOFError, ValueError, AttributeError, ImportError, TypeError, IndexError, KeyError) as exc:
+        raise L3MVNError(f"{path} is corrupt or truncated ({type(exc).__name__}: {exc})") from None
+
+
 def load_split(dataset: str | Path, split: str, **scene_kwargs) -> dict[str, dict[int, SceneMap]]:
     """All scenes and floors of a split: ``{scene: {floor: SceneMap}}``."""
     path = info_path(dataset, split)
-    try:
-        with bz2.BZ2File(path) as fh:
-            raw = pickle.load(fh)
-    except (OSError, EOFError, pickle.UnpicklingError, ValueError, AttributeError, ImportError) as exc:
-        raise L3MVNError(f"{path} is corrupt or truncated ({type(exc).__name__}: {exc})") from None
+    raw = read_info(path)
     if not isinstance(raw, dict) or not raw:
         raise L3MVNError(f"{path}: expected a non-empty dict {{scene: {{floor: map}}}}, got {type(raw).__name__}")
     scenes: dict[str, dict[int, SceneMap]] = {}
