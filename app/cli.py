@@ -1,4 +1,4 @@
-"""``l3mvn serve``: arguments and entry point (l3mvn/cli.py wires the subcommand to these two)."""
+"""The installed `l3mvn` script: the library's commands plus `serve`, the dashboard (its arguments and run)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ from l3mvn.errors import L3MVNError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from l3mvn.policies import POLICY_NAMES
+    from app.origin import ALLOW_ORIGIN_FLAG
+    from l3mvn.registry import POLICY_NAMES
 
     parser.add_argument("--dataset", default=None, help="SemExp-format dataset directory (default: procedural houses)")
     parser.add_argument("--split", default="val", help="split name inside --dataset (default: val)")
@@ -21,25 +22,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         else "l3mvn-zs", help="policy selected when the page opens (changeable in the page)")
     parser.add_argument("--host", default="127.0.0.1",
                         help="interface to bind (default 127.0.0.1; anything else exposes the controls)")
+    parser.add_argument(ALLOW_ORIGIN_FLAG, action="append", default=[], metavar="ORIGIN", dest="allow_origin",
+                        help="also accept pages served from ORIGIN (scheme://host[:port], e.g. a reverse "
+                             "proxy's https://studio.example.com); repeatable. By default only "
+                             "http://127.0.0.1:PORT, http://localhost:PORT and http://HOST:PORT may connect")
     parser.add_argument("--port", type=int, default=8080, help="port (default 8080)")
+    parser.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                        help="override any config field, as for `l3mvn eval` (`l3mvn config` lists them)")
     parser.add_argument("--speed", type=float, default=4.0, help="steps per second while running (default 4)")
     parser.add_argument("--record", action="store_true", help="record each episode to recordings/*.rrd")
     parser.add_argument("--record-dir", default="recordings", help="where --record writes (default recordings/)")
 
 
 def run(args: argparse.Namespace) -> int:
+    from app.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS
     from app.server import start_dashboard
+    from l3mvn.config import Config, override
 
     try:
-        dash = start_dashboard(dataset=args.dataset, split=args.split, policy=args.policy, host=args.host,
+        dash = start_dashboard(cfg=override(Config(), args.set), dataset=args.dataset, split=args.split, policy=args.policy, host=args.host,
                                port=args.port, houses=args.houses, episodes_per_house=args.episodes_per_house,
                                seed=args.seed, steps_per_second=args.speed, record=args.record,
-                               record_dir=args.record_dir)
+                               record_dir=args.record_dir, allow_origins=args.allow_origin)
     except L3MVNError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    if args.host not in ("127.0.0.1", "localhost", "::1"):
-        print(f"warning: serving on {args.host}: anyone who can reach it can drive the dashboard", file=sys.stderr)
+    if args.host not in LOOPBACK_HOSTS:
+        print(f"warning: serving on {args.host}: anyone who can reach it can drive the dashboard; "
+              f"a browser that opens it by another name needs {ALLOW_ORIGIN_FLAG} http://NAME:{args.port}",
+              file=sys.stderr)
     print(f"L3MVN Studio dashboard: {dash.url}  (Ctrl-C to stop)", flush=True)
     try:
         while True:
@@ -51,11 +62,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Stand-alone entry (``python -m app.cli``) until ``l3mvn serve`` is wired."""
+def serve_main(argv: list[str] | None = None) -> int:
+    """``l3mvn serve`` on its own (``argv`` without the subcommand)."""
     parser = argparse.ArgumentParser(prog="l3mvn serve", description="live web dashboard")
     add_arguments(parser)
     return run(parser.parse_args(argv))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The installed ``l3mvn`` script: the library's commands and the dashboard's ``serve``."""
+    from l3mvn.cli import Command
+    from l3mvn.cli import main as l3mvn_main
+
+    return l3mvn_main(argv, extra={"serve": Command("the live web dashboard (viser)", add_arguments, run)})
 
 
 if __name__ == "__main__":

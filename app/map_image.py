@@ -13,7 +13,7 @@ import numpy as np
 from app.state import Cell, FrontierMarker, MapView
 from l3mvn.events import Decision
 from l3mvn.scenes.scene import SceneMap
-from l3mvn.sim.types import Pose
+from l3mvn.types import Pose
 from l3mvn.viz import category_palette, legend
 
 UNEXPLORED = (28, 30, 36)

@@ -5,17 +5,18 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterable
 
 import viser
 
+from app.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS, OriginPolicy
 from app.session_worker import DashboardController
 from app.views import DashboardView
-from l3mvn.config import SimConfig
+from app.viser_hooks import start_checked_server
+from l3mvn.config import Config
 from l3mvn.datasets import load_episode_set
 
 log = logging.getLogger(__name__)
-
-LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 
 
 @dataclass
@@ -40,13 +41,20 @@ class Dashboard:
 
 def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", policy: str = "oracle",
                     host: str = "127.0.0.1", port: int = 8080, houses: int = 3,
-                    episodes_per_house: int = 5, seed: int = 0, cfg: SimConfig | None = None,
+                    episodes_per_house: int = 5, seed: int = 0, cfg: Config | None = None,
                     steps_per_second: float = 4.0, record: bool = False,
-                    record_dir: str | Path = "recordings", verbose: bool = False) -> Dashboard:
-    """Load the episodes, start the worker and serve the page (returns at once; threads run it)."""
-    cfg = cfg or SimConfig()
-    if host not in LOCAL_HOSTS:
-        log.warning("serving on %s: anyone who can reach this machine can drive the dashboard", host)
+                    record_dir: str | Path = "recordings", verbose: bool = False,
+                    allow_origins: Iterable[str] = ()) -> Dashboard:
+    """Load the episodes, start the worker and serve the page (returns at once; threads run it).
+
+    Only pages served from this dashboard's own address, or from one of ``allow_origins`` (a reverse
+    proxy's public origin, ``https://host[:port]``), may connect: see app/origin.py.
+    """
+    cfg = cfg or Config()
+    origins = OriginPolicy(host, allow_origins)
+    if host not in LOOPBACK_HOSTS:
+        log.warning("serving on %s: anyone who can reach this machine can drive the dashboard; browsers "
+                    "that open it by another name need %s http://NAME:%d", host, ALLOW_ORIGIN_FLAG, port)
     episodes = load_episode_set(dataset, split, houses=houses, episodes_per_house=episodes_per_house,
                                 seed=seed, cfg=cfg)
     controller = DashboardController(episodes, cfg, policy=policy, seed=seed,
@@ -54,7 +62,8 @@ def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", po
     try:
         if record:
             controller.set_record(True)
-        server = viser.ViserServer(host=host, port=port, label="L3MVN Studio", verbose=verbose)
+        server = start_checked_server(origins.check, host=host, port=port, label="L3MVN Studio",
+                                      verbose=verbose)
     except BaseException:
         controller.close()
         raise

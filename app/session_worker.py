@@ -10,26 +10,28 @@ on serving.
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
 import time
 from dataclasses import replace
+from numbers import Real
 from pathlib import Path
 from typing import Callable
 
 from app.map_image import agent_map_view, ground_truth_view
 from app.state import Cell, Frames, Metrics, Notice, Snapshot
-from l3mvn.config import SimConfig, config_hash
+from l3mvn.config import Config, config_hash
 from l3mvn.datasets import EpisodeSet
 from l3mvn.errors import L3MVNError
 from l3mvn.events import EventBus, StepEvent
-from l3mvn.policies import (
-    DIRECT_POLICIES, LANGUAGE_POLICIES, POLICY_NAMES, PolicyOptions, check_policy, make_policy,
+from l3mvn.registry import (
+    DIRECT_POLICIES, LANGUAGE_POLICIES, POLICY_NAMES, check_policy,
 )
 from l3mvn.scenes.scene import GOAL_CATEGORIES
-from l3mvn.session import EpisodeSession
-from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.sim.types import Episode, Pose
+from l3mvn.runner import Runner
+from l3mvn.session import EpisodeSession, Steerable
+from l3mvn.types import Episode, Pose
 from l3mvn.viz import colorize_depth, colorize_semantic
 
 log = logging.getLogger(__name__)
@@ -43,11 +45,11 @@ FRAME_WIDTH = 320  # camera frames are shown at most this wide
 class DashboardController:
     """Shared state + worker thread. Methods are safe to call from any thread."""
 
-    def __init__(self, episodes: EpisodeSet, cfg: SimConfig | None = None, *, policy: str = "oracle",
+    def __init__(self, episodes: EpisodeSet, cfg: Config | None = None, *, policy: str = "oracle",
                  seed: int = 0, steps_per_second: float = 4.0, record_dir: str | Path | None = None) -> None:
         if not episodes.episodes:
             raise L3MVNError(f"{episodes.name}/{episodes.split} has no episodes to show")
-        self.episodes, self.cfg, self.seed = episodes, cfg or SimConfig(), seed
+        self.episodes, self.cfg, self.seed = episodes, cfg or Config(), seed
         self.policy_name = check_policy(policy)
         self.scorer: str | None = None
         self.record = False
@@ -57,8 +59,7 @@ class DashboardController:
         self._by_scene: dict[str, list[Episode]] = {}
         for ep in episodes.episodes:
             self._by_scene.setdefault(f"{ep.scene}/{ep.floor}", []).append(ep)
-        self._envs: dict[str, BuiltinSimulator] = {}
-        self._policies: dict[tuple[str, str], object] = {}
+        self._runner = Runner(self.cfg, seed=seed)
         self._session: EpisodeSession | None = None
         self._trajectory: list[Pose] = []
         self._manual: Cell | None = None
@@ -118,6 +119,10 @@ class DashboardController:
     def running(self) -> bool:
         return self._running
 
+    @property
+    def steps_per_second(self) -> float:
+        return self._speed
+
     # --- commands (validate now, work on the worker) -----------------------------------------
     def reset(self, scene_key: str, episode_id: int, *, client_id: int | None = None) -> None:
         episode = self._find_episode(scene_key, episode_id)
@@ -174,8 +179,7 @@ class DashboardController:
     def set_manual_goal(self, cell: Cell | None, *, client_id: int | None = None) -> None:
         """Make a map cell the long-term goal until reached (None clears it)."""
         session = self._require_running_episode()
-        setter = getattr(session.policy, "set_manual_goal", None)
-        if setter is None:
+        if not isinstance(session.policy, Steerable):
             raise L3MVNError(
                 f"policy {session.policy_name!r} does not take manual goals; map-based policies do "
                 f"(valid: {', '.join(p for p in POLICY_NAMES if p not in DIRECT_POLICIES)})"
@@ -187,15 +191,15 @@ class DashboardController:
             cell = (int(cell[0]), int(cell[1]))
             if not view.contains(cell):
                 raise L3MVNError(f"cell {cell} is outside the {view.grid_shape[0]}x{view.grid_shape[1]} map")
-        self._submit("manual goal", lambda: self._do_manual_goal(setter, cell), client_id)
+        self._submit("manual goal", lambda: self._do_manual_goal(session, cell), client_id)
 
     def change_target(self, goal: str, *, client_id: int | None = None) -> None:
         session = self._require_running_episode()
         if goal not in GOAL_CATEGORIES:
             raise L3MVNError(f"unknown target {goal!r}; valid targets: {', '.join(GOAL_CATEGORIES)}")
-        present = session.env.scene.present_goals()
+        present = session.task.scene.present_goals()
         if goal not in present:
-            raise L3MVNError(f"target {goal!r} is not in {session.env.scene.key}; present: {', '.join(present)}")
+            raise L3MVNError(f"target {goal!r} is not in {session.task.scene.key}; present: {', '.join(present)}")
         if goal == session.episode.goal:
             return
         self._submit("target", lambda: self._do_change_target(goal), client_id)
@@ -257,20 +261,15 @@ class DashboardController:
                     self._steps_pending -= 1
 
     def _do_reset(self, episode: Episode) -> None:
-        key = f"{episode.scene}/{episode.floor}"
-        if key not in self._envs:
-            self._envs[key] = BuiltinSimulator(self.episodes.scene_of(episode), self.cfg)
-        env = self._envs[key]
-        if (key, self.policy_name) not in self._policies:
-            if self.policy_name in LANGUAGE_POLICIES:
-                self._notify(f"loading the language model of {self.policy_name} (a few seconds, once)")
-            self._policies[(key, self.policy_name)] = make_policy(self.policy_name, env, self.seed)
-        policy = self._policies[(key, self.policy_name)]
+        scene = self.episodes.scene_of(episode)
+        if self.policy_name in LANGUAGE_POLICIES and self.policy_name not in self._runner.floor(scene).policies:
+            self._notify(f"loading the language model of {self.policy_name} (a few seconds, once)")
         # The same hash ``l3mvn eval`` writes for these settings, so dashboard runs can be matched.
-        options = PolicyOptions(scorer=self.scorer if self.policy_name in LANGUAGE_POLICIES else None)
-        chash = config_hash(self.cfg, options, extra={"policy": self.policy_name, "seed": self.seed})
+        scorer = self.scorer if self.policy_name in LANGUAGE_POLICIES else None
+        chash = config_hash(self.cfg.replace(policy=replace(self.cfg.policy, scorer=scorer)),
+                            extra={"policy": self.policy_name, "seed": self.seed})
         self._stop_recorder()
-        self._session = EpisodeSession(env, policy, policy_name=self.policy_name, config_hash=chash, bus=self.bus)
+        self._session = self._runner.session(scene, self.policy_name, self.bus, config_hash=chash)
         self._manual, self._segment_note = None, ""
         self._apply_scorer()
         if self.record:
@@ -291,8 +290,8 @@ class DashboardController:
         if session.done:
             self._running = False
 
-    def _do_manual_goal(self, setter: Callable, cell: Cell | None) -> None:
-        setter(cell)
+    def _do_manual_goal(self, session: EpisodeSession, cell: Cell | None) -> None:
+        session.set_manual_goal(cell)
         self._manual = cell
         what = "cleared the manual goal" if cell is None else f"manual long-term goal set to map cell {cell}"
         self._notify(what)
@@ -314,11 +313,10 @@ class DashboardController:
         session = self._session
         if self.scorer is None or session is None:
             return
-        setter = getattr(session.policy, "set_scorer", None)
-        if setter is None:
-            self._notify(f"policy {session.policy_name!r} does not use a language scorer", level="warning")
-            return
-        setter(self.scorer)
+        try:
+            session.set_scorer(self.scorer)
+        except L3MVNError as exc:
+            self._notify(str(exc), level="warning")
 
     def _start_recorder(self, episode: Episode) -> None:
         from l3mvn.recording import Recorder
@@ -342,7 +340,7 @@ class DashboardController:
         if decision is not None and decision.map is not None:
             view = agent_map_view(decision)
         elif session.policy_name in DIRECT_POLICIES:
-            view = ground_truth_view(session.env.scene, self._trajectory, decision)
+            view = ground_truth_view(session.task.scene, self._trajectory, decision)
         else:
             view = None  # a map-based agent before its first step
         if decision is not None and decision.goal_kind == "manual" and decision.override:
@@ -353,7 +351,7 @@ class DashboardController:
         if event.done and event.result is not None:
             metrics = metrics.add(event.result)
         self._publish(event=event, frames=self._frames(event), map=view, metrics=metrics,
-                      episode_id=session.episode.episode_id, scene=session.env.scene.key,
+                      episode_id=session.episode.episode_id, scene=session.task.scene.key,
                       note="", error=None, stepped_at=stepped_at)
 
     def _frames(self, event: StepEvent) -> Frames:
@@ -361,7 +359,7 @@ class DashboardController:
         k = max(1, obs.rgb.shape[1] // FRAME_WIDTH)
         return Frames(
             rgb=obs.rgb[::k, ::k],
-            depth=colorize_depth(obs.depth[::k, ::k], self.cfg.max_depth_m),
+            depth=colorize_depth(obs.depth[::k, ::k], self.cfg.sim.max_depth_m),
             semantic=colorize_semantic(obs.semantic[::k, ::k], obs.categories),
         )
 
@@ -404,4 +402,7 @@ class DashboardController:
 
 
 def _clamp_speed(value: float) -> float:
+    """``value`` within [MIN_SPEED, MAX_SPEED]; not a finite number is refused (Run waits 1 / speed)."""
+    if not isinstance(value, Real) or isinstance(value, bool) or not math.isfinite(value):
+        raise L3MVNError(f"steps per second must be a number from {MIN_SPEED:g} to {MAX_SPEED:g}, not {value!r}")
     return float(min(max(value, MIN_SPEED), MAX_SPEED))

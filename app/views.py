@@ -5,12 +5,17 @@ new or reloaded tab gets the current state from viser on connect. Only notices a
 request go to that tab (``client.add_notification``). Snapshots are drawn on a thread of their own
 that always takes the newest one, so a fast agent drops frames instead of queueing them.
 
+Nothing a tab sends is trusted: each GUI value is checked against its control before viser applies
+it (``_admit_update``), map-click rays are checked before use, and every handler runs through
+``_reported``, so whatever goes wrong becomes a notice to the tab that asked and the server goes on.
+
 Scene frame: map cell (row, col) -> (x, y) = ((col + 0.5) res, -(row + 0.5) res), z up toward the
 camera, so the top-down view shows the map the way its image is stored (row 0 on top).
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import threading
@@ -18,11 +23,13 @@ import threading
 import numpy as np
 import viser
 
+from app.client_input import ray_refusal, update_refusal
 from app.map_image import score_color
 from app.session_worker import DEFAULT_SCORER, MAX_SPEED, MIN_SPEED, DashboardController
 from app.state import Cell, MapView, Notice, Snapshot
+from app.viser_hooks import check_gui_updates, handle_uuid, ignore_client_messages_except, show_value_to
 from l3mvn.errors import L3MVNError
-from l3mvn.policies import POLICY_NAMES
+from l3mvn.registry import POLICY_NAMES
 from l3mvn.scenes.scene import GOAL_CATEGORIES
 from l3mvn.viz import side_by_side
 
@@ -31,6 +38,8 @@ log = logging.getLogger(__name__)
 BUTTONS = ("Reset", "Step", "Run", "Pause")
 MARKER_RADIUS_M = 0.22
 _LEVEL_COLORS = {"info": "blue", "warning": "yellow", "error": "red"}
+_CLICKABLE = (viser.GuiButtonHandle, viser.GuiButtonGroupHandle)  # on_click, not on_update; no value to show
+_INPUTS = (viser.GuiInputHandle, *_CLICKABLE)  # every control a tab can send values to
 
 
 def cell_to_xy(cell: Cell, res: float) -> tuple[float, float]:
@@ -42,12 +51,13 @@ def xy_to_cell(x: float, y: float, res: float) -> Cell:
 
 
 def ray_to_cell(origin, direction, res: float) -> Cell | None:
-    """Where a click ray meets the map plane (z = 0); None when it runs parallel or away."""
+    """Where a click ray meets the map plane (z = 0); None when it runs parallel, away, or off to infinity."""
     oz, dz = float(origin[2]), float(direction[2])
     if abs(dz) < 1e-9 or -oz / dz < 0:
         return None
     t = -oz / dz
-    return xy_to_cell(float(origin[0]) + t * float(direction[0]), float(origin[1]) + t * float(direction[1]), res)
+    x, y = float(origin[0]) + t * float(direction[0]), float(origin[1]) + t * float(direction[1])
+    return xy_to_cell(x, y, res) if math.isfinite(x) and math.isfinite(y) else None
 
 
 class DashboardView:
@@ -64,6 +74,9 @@ class DashboardView:
         self._fitted_episode: tuple | None = None
         self._build_gui()
         self._build_scene()
+        self._inputs = {handle_uuid(h): h for h in vars(self).values() if isinstance(h, _INPUTS)}
+        check_gui_updates(server, self._admit_update)
+        ignore_client_messages_except(server, "GuiUpdateMessage", "ScenePointerMessage")  # controls, map clicks
         controller.on_snapshot(self._on_snapshot)
         controller.on_notice(self._on_notice)
         self._thread = threading.Thread(target=self._draw_loop, name="l3mvn-dashboard-view", daemon=True)
@@ -111,67 +124,99 @@ class DashboardView:
     def _wire_gui(self) -> None:
         ctl = self.ctl
 
-        @self.refresh_recordings.on_click
+        @self._on(self.refresh_recordings)
         def _(event: viser.GuiEvent) -> None:
             self.recordings.content = _recordings_markdown(ctl.record_dir)
 
-        @self.scene.on_update
+        @self._on(self.scene)
         def _(event: viser.GuiEvent) -> None:
-            if event.client is not None:
-                labels = self._episode_labels(self.scene.value)
-                self.episode.options = labels
-                self.episode.value = labels[0]
+            labels = self._episode_labels(self.scene.value)
+            self.episode.options = labels
+            self.episode.value = labels[0]
 
-        @self.controls.on_click
+        @self._on(self.controls)
         def _(event: viser.GuiEvent) -> None:
-            self._act(event, self._press, self.controls.value, event.client_id)
+            self._press(self.controls.value, event.client_id)
 
-        @self.speed.on_update
+        @self._on(self.speed)
         def _(event: viser.GuiEvent) -> None:
-            if event.client is not None:
-                ctl.set_speed(self.speed.value)
+            ctl.set_speed(self.speed.value)
 
-        @self.policy.on_update
+        @self._on(self.policy)
         def _(event: viser.GuiEvent) -> None:
-            if event.client is not None:
-                self._act(event, lambda: ctl.set_policy(self.policy.value, client_id=event.client_id))
+            ctl.set_policy(self.policy.value, client_id=event.client_id)
 
-        @self.scorer.on_update
+        @self._on(self.scorer)
         def _(event: viser.GuiEvent) -> None:
-            if event.client is not None:
-                self._act(event, lambda: ctl.set_scorer(self.scorer.value, client_id=event.client_id))
+            ctl.set_scorer(self.scorer.value, client_id=event.client_id)
 
-        @self.record.on_update
+        @self._on(self.record)
         def _(event: viser.GuiEvent) -> None:
-            if event.client is None:
-                return
             try:
                 ctl.set_record(self.record.value, client_id=event.client_id)
-            except L3MVNError as exc:
-                self.record.value = False
-                self._tell(event.client_id, str(exc), "warning")
+            finally:
+                self.record.value = ctl.record  # the box shows what the controller does, refused or not
 
-        @self.target.on_update
+        @self._on(self.target)
         def _(event: viser.GuiEvent) -> None:
-            if event.client is not None and ctl.snapshot.event is not None and not ctl.snapshot.event.done:
-                self._act(event, lambda: ctl.change_target(self.target.value, client_id=event.client_id))
+            if ctl.snapshot.event is not None and not ctl.snapshot.event.done:
+                ctl.change_target(self.target.value, client_id=event.client_id)
 
-        @self.goal_buttons.on_click
+        @self._on(self.goal_buttons)
         def _(event: viser.GuiEvent) -> None:
             if self.goal_buttons.value == "Clear":
-                self._act(event, lambda: ctl.set_manual_goal(None, client_id=event.client_id))
+                ctl.set_manual_goal(None, client_id=event.client_id)
                 return
             cell = self._frontier_cells.get(self.frontier_pick.value)
             if cell is None:
-                self._tell(event.client_id, "no frontier picked: step until the map shows frontiers", "warning")
-                return
-            self._act(event, lambda: ctl.set_manual_goal(cell, client_id=event.client_id))
+                raise L3MVNError("no frontier picked: step until the map shows frontiers")
+            ctl.set_manual_goal(cell, client_id=event.client_id)
 
-        @self.fit.on_click
+        @self._on(self.fit)
         def _(event: viser.GuiEvent) -> None:
             view = ctl.snapshot.map
-            if view is not None and event.client is not None:
+            if view is not None:
                 self._fit_camera(event.client.camera, view)
+
+    def _on(self, handle):
+        """Decorator: run the function when a tab changes or clicks ``handle``, through ``_reported``.
+
+        Assignments made here on the server fire ``on_update`` too (with no client); only a tab's
+        own changes are handled, so a handler that sets a value does not run itself again.
+        """
+        register = handle.on_click if isinstance(handle, _CLICKABLE) else handle.on_update
+
+        def wire(fn):
+            reported = self._reported(handle.label, fn)
+
+            def from_tab(event: viser.GuiEvent) -> None:
+                if event.client is not None:
+                    reported(event)
+
+            register(from_tab)
+            return fn
+
+        return wire
+
+    def _reported(self, what: str, fn):
+        """``fn(event)`` such that whatever it raises becomes a notice to the tab that sent ``event``.
+
+        A refused request (``L3MVNError``) is a warning with its own message; anything else is a bug,
+        logged with its traceback and shown as an error. Without this, viser's thread pool would
+        print the traceback and the tab would never know its click did nothing.
+        """
+
+        @functools.wraps(fn)
+        def run(event) -> None:
+            try:
+                fn(event)
+            except L3MVNError as exc:
+                self._tell(event.client_id, str(exc), "warning")
+            except Exception as exc:
+                log.exception("dashboard: %s failed", what)
+                self._tell(event.client_id, f"{what} failed: {type(exc).__name__}: {exc}", "error")
+
+        return run
 
     def _build_scene(self) -> None:
         scene = self.server.scene
@@ -187,9 +232,7 @@ class DashboardView:
                                         anchor="top-center")
         self.stg = scene.add_icosphere("/goal/short_term", 0.08, (255, 150, 0), visible=False)
 
-        @scene.on_click()
-        def _(event: viser.SceneClickEvent) -> None:
-            self._on_map_click(event)
+        scene.on_click()(self._reported("map click", self._on_map_click))
 
     # --- input -------------------------------------------------------------------------------
     def _press(self, button: str, client_id: int) -> None:
@@ -205,19 +248,19 @@ class DashboardView:
             ctl.pause(client_id=client_id)
 
     def _on_map_click(self, event: viser.SceneClickEvent) -> None:
+        problem = ray_refusal(event.ray_origin, event.ray_direction)
+        if problem is not None:
+            raise L3MVNError(problem)
         view = self.ctl.snapshot.map
         if view is None:
-            self._tell(event.client_id, "no map yet: press Reset, then Step", "warning")
-            return
+            raise L3MVNError("no map yet: press Reset, then Step")
         cell = ray_to_cell(event.ray_origin, event.ray_direction, view.resolution_m)
         rows, cols = view.cells
         r0, c0 = view.origin
         if cell is None or not (r0 <= cell[0] < r0 + rows and c0 <= cell[1] < c0 + cols):
-            self._tell(event.client_id, "that click is outside the map: click on the map or a frontier", "warning")
-            return
+            raise L3MVNError("that click is outside the map: click on the map or a frontier")
         hit = self._frontier_hit(view, cell)
-        self._act(None, lambda: self.ctl.set_manual_goal(hit or cell, client_id=event.client_id),
-                  client_id=event.client_id)
+        self.ctl.set_manual_goal(hit or cell, client_id=event.client_id)
 
     def _frontier_hit(self, view: MapView, cell: Cell) -> Cell | None:
         reach = (MARKER_RADIUS_M * 1.5 / view.resolution_m) ** 2
@@ -225,13 +268,26 @@ class DashboardView:
         near = [n for n in near if n[0] <= reach]
         return min(near)[1] if near else None
 
-    def _act(self, event: viser.GuiEvent | None, fn, *args, client_id: int | None = None) -> None:
-        """Run a controller command; a refused one becomes a notice for the tab that asked."""
-        who = client_id if event is None else event.client_id
+    def _admit_update(self, client_id: int, uuid: str, updates: dict) -> bool:
+        """Whether viser may apply a tab's GUI update; runs on viser's event loop, before any state changes.
+
+        A refused update changes nothing anywhere: the tab that sent it is told why and shown the
+        value the server holds again; other tabs see nothing. A check that fails refuses too.
+        """
+        handle = self._inputs.get(uuid)
         try:
-            fn(*args)
-        except L3MVNError as exc:
-            self._tell(who, str(exc), "warning")
+            problem = ("that control is not on this page" if handle is None
+                       else update_refusal(handle, updates))
+            if problem is None:
+                return True
+            log.info("dashboard: refused an update from client %s: %s", client_id, problem)
+            self._tell(client_id, problem, "warning")
+            client = self.server.get_clients().get(client_id)
+            if client is not None and handle is not None and not isinstance(handle, _CLICKABLE):
+                show_value_to(client, handle)
+        except Exception:
+            log.exception("dashboard: checking an update from client %s failed; refused it", client_id)
+        return False
 
     def _tell(self, client_id: int | None, text: str, level: str = "info") -> None:
         self._on_notice(Notice(text, level, client_id))

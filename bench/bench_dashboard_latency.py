@@ -20,7 +20,7 @@ import time
 from playwright.sync_api import sync_playwright
 
 from app.server import start_dashboard
-from l3mvn.config import SimConfig
+from l3mvn.config import Config
 
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
@@ -49,7 +49,7 @@ def main() -> None:
     args = ap.parse_args()
 
     dash = start_dashboard(port=_free_port(), houses=1, episodes_per_house=1, policy=args.policy,
-                           cfg=SimConfig())
+                           cfg=Config())
     ctl = dash.controller
     stamps: dict[int, float] = {}
     ctl.on_snapshot(lambda s: s.event is not None and stamps.setdefault(s.event.step, s.stepped_at))

@@ -29,24 +29,23 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from l3mvn.config import SimConfig  # noqa: E402
+from l3mvn.config import Config, PolicyConfig  # noqa: E402
 from l3mvn.datasets import load_episode_set  # noqa: E402
 from l3mvn.language import GOALS  # noqa: E402
-from l3mvn.policies import PolicyOptions, make_policy  # noqa: E402
+from l3mvn.registry import make_policy  # noqa: E402
 from l3mvn.policies.oracle import frontier_goal_distances  # noqa: E402
-from l3mvn.session import EpisodeSession  # noqa: E402
-from l3mvn.sim.simulator import BuiltinSimulator  # noqa: E402
+from l3mvn.runner import Runner  # noqa: E402
 
 # (label, policy name, options): the paper's policies and its Table II ablations.
 CANDIDATES = [
-    ("cost-utility", "cost-utility", PolicyOptions()),
-    ("frontier", "frontier", PolicyOptions()),
-    ("l3mvn-ff", "l3mvn-ff", PolicyOptions()),
-    ("l3mvn-ff official_code", "l3mvn-ff", PolicyOptions(selection="official_code")),
-    ("l3mvn-zs", "l3mvn-zs", PolicyOptions()),
-    ("l3mvn-zs embedding", "l3mvn-zs", PolicyOptions(scorer="embedding")),
-    ("near+llm", "near+llm", PolicyOptions()),
-    ("oracle-frontier", "oracle-frontier", PolicyOptions()),  # 0 by construction: checks the bench
+    ("cost-utility", "cost-utility", PolicyConfig()),
+    ("frontier", "frontier", PolicyConfig()),
+    ("l3mvn-ff", "l3mvn-ff", PolicyConfig()),
+    ("l3mvn-ff official_code", "l3mvn-ff", PolicyConfig(selection="official_code")),
+    ("l3mvn-zs", "l3mvn-zs", PolicyConfig()),
+    ("l3mvn-zs embedding", "l3mvn-zs", PolicyConfig(scorer="embedding")),
+    ("near+llm", "near+llm", PolicyConfig()),
+    ("oracle-frontier", "oracle-frontier", PolicyConfig()),  # 0 by construction: checks the bench
 ]
 
 _STATE: dict = {}
@@ -55,14 +54,16 @@ _STATE: dict = {}
 def _episode(args: tuple[str | None, str, int, str]) -> list[tuple[str, str, float, bool]]:
     dataset, split, index, behaviour = args
     if "eset" not in _STATE:
-        _STATE["eset"] = load_episode_set(dataset, split, cfg=_STATE.setdefault("cfg", SimConfig().with_frame(120, 160)))
+        _STATE["eset"] = load_episode_set(dataset, split, cfg=_STATE.setdefault("cfg", Config().with_frame(120, 160)))
     eset, cfg = _STATE["eset"], _STATE["cfg"]
     ep = eset.episodes[index]
-    env = BuiltinSimulator(eset.scene_of(ep), cfg)
-    candidates = [(label, make_policy(name, env, 0, opts).global_policy) for label, name, opts in CANDIDATES]
-    session = EpisodeSession(env, make_policy(behaviour, env, 0), policy_name=behaviour, config_hash="bench")
+    runner = Runner(cfg, config_hash="bench")
+    floor = runner.floor(eset.scene_of(ep))
+    candidates = [(label, make_policy(name, floor.env, floor.task, cfg.replace(policy=opts)).global_policy)
+                  for label, name, opts in CANDIDATES]
+    session = runner.session(eset.scene_of(ep), behaviour)
     session.start(ep)
-    region, rng = env.region(ep.goal), np.random.default_rng(0)
+    region, rng = floor.task.region(ep.goal), np.random.default_rng(0)
     rows, last = [], None
     while not session.done:
         decision = session.step().decision
@@ -94,7 +95,7 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=None, help="first N episodes only")
     parser.add_argument("--json", action="store_true", help="print the table as one JSON line too")
     args = parser.parse_args()
-    eset = load_episode_set(args.dataset, args.split, cfg=SimConfig().with_frame(120, 160))
+    eset = load_episode_set(args.dataset, args.split, cfg=Config().with_frame(120, 160))
     n = len(eset.episodes) if args.limit is None else min(args.limit, len(eset.episodes))
     jobs = [(args.dataset, args.split, i, args.behaviour) for i in range(n)]
     regret: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))

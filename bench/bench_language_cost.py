@@ -16,32 +16,28 @@ import time
 import numpy as np
 import torch
 
-from l3mvn.config import SimConfig
+from l3mvn.config import Config
 from l3mvn.datasets import load_episode_set
 from l3mvn.events import EventBus
-from l3mvn.policies import make_policy
 from l3mvn.policies.language_policy import shared_scorer
-from l3mvn.session import EpisodeSession
-from l3mvn.sim.simulator import BuiltinSimulator
+from l3mvn.runner import Runner
 
 
-def run(policy: str, eset, cfg: SimConfig, episodes) -> dict:
+def run(policy: str, eset, cfg: Config, episodes) -> dict:
     stages: dict[str, list[float]] = {}
     sim_s = steps = 0
-    envs: dict[str, BuiltinSimulator] = {}
+    runner = Runner(cfg, config_hash="bench")
     for ep in episodes:
-        key = f"{ep.scene}/{ep.floor}"
-        env = envs.setdefault(key, BuiltinSimulator(eset.scene_of(ep), cfg))
         bus = EventBus()
         bus.subscribe(lambda ev: [stages.setdefault(k, []).append(v) for k, v in ev.decision.timings_ms.items()]
                       if ev.decision is not None else None)
-        session = EpisodeSession(env, make_policy(policy, env, 0), policy_name=policy, config_hash="bench", bus=bus)
+        session = runner.session(eset.scene_of(ep), policy, bus)
         session.start(ep)
         while not session.done:
             t = time.perf_counter()
             session.step()
             sim_s += time.perf_counter() - t
-        steps += env.steps
+        steps += session.env.steps
     agent_ms = {k: float(np.sum(v)) / steps for k, v in stages.items()}
     return {"steps": steps, "step_ms": sim_s * 1e3 / steps, "agent_ms": agent_ms}
 
@@ -55,7 +51,7 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1, help="torch threads (1 per worker is the eval setting)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    cfg = SimConfig().with_frame(120, 160)
+    cfg = Config().with_frame(120, 160)
     eset = load_episode_set(args.dataset, args.split, houses=3, episodes_per_house=2, seed=0, cfg=cfg)
     episodes = eset.episodes[: args.episodes]
     for name in ("feedforward", "roomtype"):

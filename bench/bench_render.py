@@ -19,7 +19,7 @@ from l3mvn.config import SimConfig
 from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap, disk
 from l3mvn.sim.render import Renderer
 from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.sim.types import Action, Episode, Pose
+from l3mvn.types import Action, Episode, Pose
 from l3mvn.sim.world import build_world
 
 SIZES = ((120, 160), (480, 640))

@@ -19,7 +19,7 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from l3mvn.config import SimConfig
+from l3mvn.config import Config
 from l3mvn.eval.backends import run_local
 from l3mvn.eval.job import EvalJob, is_error_row
 
@@ -148,9 +148,9 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
 
     h, w = (int(v) for v in args.frame.lower().split("x"))
-    sim = SimConfig().with_frame(h, w)
+    config = Config().with_frame(h, w)
     if args.max_steps:
-        sim = dataclasses.replace(sim, max_steps=args.max_steps)
+        config = config.replace(sim=dataclasses.replace(config.sim, max_steps=args.max_steps))
     backends = [b.strip() for b in args.backends.split(",") if b.strip()]
     if "ray" in backends:
         try:
@@ -165,7 +165,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         for policy in args.policy or ["oracle"]:
             job = EvalJob.create(args.dataset, args.split, houses=args.houses,
-                                 episodes_per_house=args.episodes_per_house, seed=args.seed, sim=sim, policy=policy)
+                                 episodes_per_house=args.episodes_per_house, seed=args.seed, config=config,
+                                 policy=policy)
             keys = job.keys()[: args.episodes] if args.episodes else job.keys()
             for backend in backends:
                 for n in args.workers:

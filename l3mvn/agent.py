@@ -11,110 +11,22 @@ from __future__ import annotations
 import math
 import time
 import zlib
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import cv2
 import numpy as np
 
-from l3mvn.config import SimConfig
+from l3mvn.config import Config
 from l3mvn.errors import L3MVNError
 from l3mvn.events import Decision
-from l3mvn.frontiers import Frontier, FrontierConfig, extract_frontiers
+from l3mvn.frontiers import Frontier, extract_frontiers
 from l3mvn.looking import distance_to, far_sighting, look_goal, mask_centre, pick_viewpoint, turn_towards, unknown_near
-from l3mvn.mapping import CameraIntrinsics, MapConfig, SemanticMap, SemanticMapper
+from l3mvn.mapping import SemanticMap, SemanticMapper
 from l3mvn.mapping.projection import downsample_frame
 from l3mvn.perception import SegmentationNoise
-from l3mvn.planning import LocalPlanner, PlannerConfig
+from l3mvn.planning import LocalPlanner
 from l3mvn.policies.global_policies import GlobalPolicy, Selection
-from l3mvn.sim.types import Action, Episode, Observation, Pose
-
-
-@dataclass(frozen=True)
-class AgentConfig:
-    """Agent-level constants (spec: "Choosing the long-term goal", "Lessons")."""
-
-    map: MapConfig = field(default_factory=MapConfig)
-    # Turning to face a frontier is charged like walking: one 30-degree turn = one 0.25 m step.
-    frontier: FrontierConfig = field(default_factory=lambda: FrontierConfig(turn_cost_m_per_rad=0.25 / (math.pi / 6)))
-    # Obstacles grow by 1 cell, not the full agent radius: maps' navmeshes (SemExp channel 0) are
-    # already eroded by the radius, and the built-in world keeps walls 2 cells from where the agent's
-    # centre may stand, so a 3-cell dilation closes real doorways of Gibson houses.
-    planner: PlannerConfig = field(default_factory=lambda: PlannerConfig(obstacle_dilation_cells=1))
-    map_input_height: int = 120
-    map_input_width: int = 160
-    replan_every: int = 10  # num_local_steps: re-select the long-term goal this often
-    look_around_steps: int = 12  # an initial 360-degree turn (12 x 30 deg): ~+0.08 SPL in the prototype
-    target_min_cells: int = 4  # cells of the goal channel before the target counts as seen
-    stop_distance_m: float = 0.9  # stop when the mapped target is this close (success needs < 1.0 m)
-    # When no path leads closer (unreachable, or stuck against what the map does not show), stop
-    # this close: the mapped cells are the surfaces seen, so the object reaches at least that near.
-    blocked_stop_distance_m: float = 0.95
-    # Goal cells too few to stop at are approached to this distance; still too few then: rejected.
-    candidate_reached_m: float = 0.9
-    target_escapes: int = 2  # escapes tried for an unreachable target before it is set aside
-    frontier_reached_m: float = 0.75  # >= the 0.5 m minimum frontier distance (no dead zone)
-    commitment_margin: float = 0.15  # keep the current frontier unless another scores this much higher
-    # Escape: after this many steps with the goal unreachable (usually walled in by its own
-    # collision marks) or a stuck signal, clear the marks and wiggle out with random turns.
-    escape_after_unreachable: int = 3
-    # Exploration goals (frontiers, sampled cells, manual cells) are approached with this small goal
-    # disk, not the object's 0.5 m one: that one reaches through walls, so a frontier in the next
-    # room read as "reached" from this side and the agent pushed into the wall.
-    explore_goal_dilation_m: float = 0.1
-    # A reached or unreachable exploration goal blocks frontiers whose centre lies this close to it.
-    blocked_radius_m: float = 1.0
-    max_reselect: int = 3  # exploration goals tried within one step before walking on
-    # An exploration goal the agent has not come 0.5 m closer to in this many steps is given up like
-    # an unreachable one: a path through unknown space that keeps meeting new walls stays "reachable"
-    # while the agent circles (random-sample kept such goals for 480 steps on the dev houses).
-    goal_patience_steps: int = 40
-    # Reaching a goal is not seeing it: an exploration goal or a glimpsed target counts as looked at
-    # only once it lies within this angle of the view's centre (the 79-degree view's half is 39.5).
-    # Gibson toilets were missed this way: the frontier at a bathroom door read as reached from
-    # 0.75 m beside it, was blocked, and the room behind it was never looked into.
-    look_tolerance_deg: float = 30.0
-    # ... and a frontier that still borders unknown space once faced is walked up to this close.
-    frontier_press_m: float = 0.3
-    # With no frontier left, areas explored only from afar (the floor of a room seen through its
-    # door) at least this large are visited before wandering at random (MapConfig.look_distance_m).
-    look_min_area_m2: float = 0.25
-    # A glimpsed target that stays under target_min_cells once approached and faced is looked at
-    # from this many other poses, this far from it (valid depth starts at 0.5 m), before set aside.
-    candidate_views: int = 2
-    viewpoint_min_m: float = 1.2
-    viewpoint_max_m: float = 1.8
-    # The goal filling this share of the (mapped) frame beyond the depth range (no depth, so no map
-    # cells) is a sighting worth walking towards: a tv 6 m down a corridor showed 120 pixels for two
-    # steps and the agent turned away for good (Tolstoy). Larger blobs without depth are too near.
-    glimpse_min_fraction: float = 0.001
-    glimpse_max_fraction: float = 0.05
-    seg_noise: float = 0.0
-
-    def __post_init__(self) -> None:
-        if self.frontier_reached_m < self.frontier.min_distance_m:
-            raise L3MVNError("frontier_reached_m must be >= the minimum frontier distance (else a dead zone)")
-        if self.replan_every < 1 or self.target_min_cells < 1 or self.goal_patience_steps < 1:
-            raise L3MVNError("replan_every, target_min_cells and goal_patience_steps must be >= 1")
-        if not 0 < self.stop_distance_m <= self.blocked_stop_distance_m:
-            raise L3MVNError("stop distances must satisfy 0 < stop_distance_m <= blocked_stop_distance_m")
-        if not 0 < self.look_tolerance_deg < 90.0:
-            raise L3MVNError(f"look_tolerance_deg must lie in (0, 90), got {self.look_tolerance_deg}")
-        if self.candidate_views < 0 or self.look_min_area_m2 < 0:
-            raise L3MVNError("candidate_views and look_min_area_m2 must be >= 0")
-        if not 0 < self.frontier_press_m < self.frontier_reached_m:
-            raise L3MVNError("frontier_press_m must satisfy 0 < frontier_press_m < frontier_reached_m")
-        if not 0 < self.glimpse_min_fraction < self.glimpse_max_fraction <= 1:
-            raise L3MVNError("glimpse fractions must satisfy 0 < glimpse_min_fraction < glimpse_max_fraction <= 1")
-        if not 0 < self.viewpoint_min_m < self.viewpoint_max_m:
-            raise L3MVNError("viewpoint distances must satisfy 0 < viewpoint_min_m < viewpoint_max_m")
-
-    def downsample_factor(self, height: int, width: int) -> int:
-        """The stride frames of this size are mapped at (SemExp: 480x640 -> 120x160 with 4)."""
-        factor = max(1, height // self.map_input_height)
-        if height % factor or width % factor:
-            raise L3MVNError(f"frame {height}x{width} is not divisible by the mapper's downsample factor {factor} "
-                             f"(height // {self.map_input_height}): choose e.g. 480x640 or 120x160")
-        return factor
+from l3mvn.types import Action, Episode, Observation, Pose
 
 
 _EXPLORING = ("frontier", "random", "explore", "look")
@@ -123,21 +35,17 @@ _EXPLORING = ("frontier", "random", "explore", "look")
 class MapAgent:
     """A policy object for ``EpisodeSession``: ``reset(episode)``, ``act(obs) -> Decision``."""
 
-    def __init__(self, global_policy: GlobalPolicy, categories: tuple[str, ...], sim: SimConfig,
-                 cfg: AgentConfig | None = None, seed: int = 0) -> None:
-        self.cfg = cfg or AgentConfig()
-        if self.cfg.blocked_stop_distance_m >= sim.success_distance_m:
-            raise L3MVNError(f"blocked_stop_distance_m ({self.cfg.blocked_stop_distance_m} m) must be below the "
-                             f"success distance ({sim.success_distance_m} m): a stop there never succeeds")
-        if self.cfg.look_tolerance_deg < sim.turn_angle_deg / 2:
-            raise L3MVNError(f"look_tolerance_deg ({self.cfg.look_tolerance_deg}) must be >= half the turn angle "
-                             f"({sim.turn_angle_deg / 2}): else the agent turns past its goal and back forever")
+    def __init__(self, global_policy: GlobalPolicy, categories: tuple[str, ...], config: Config,
+                 seed: int = 0) -> None:
+        """``config``: the whole tree (the agent reads its sim, task, map, frontiers, planner, agent and
+        policy sections; ``Config`` has checked them against each other)."""
+        self.config, self.cfg = config, config.agent
         self.global_policy = global_policy
         self.categories = categories
-        self.sim = sim
+        self.sim = config.sim
         self.seed = seed
-        self.planner = LocalPlanner(self.cfg.planner)
-        self.noise = SegmentationNoise(self.cfg.seg_noise, len(categories), seed)
+        self.planner = LocalPlanner(config.planner, config.map.resolution_m)
+        self.noise = SegmentationNoise(config.policy.seg_noise, len(categories), seed)
         self._mapper: SemanticMapper | None = None
         self._frame_shape: tuple[int, int] | None = None
         self.stuck = False
@@ -191,7 +99,7 @@ class MapAgent:
     def set_manual_goal(self, cell: tuple[int, int] | None) -> None:
         """Pursue this map cell until reached, or clear the override with None."""
         if cell is not None:
-            size = self.cfg.map.map_cells
+            size = self.config.map.map_cells
             if not (0 <= cell[0] < size and 0 <= cell[1] < size):
                 raise L3MVNError(f"cell {cell} lies outside the {size}x{size} map")
             cell = (int(cell[0]), int(cell[1]))
@@ -367,7 +275,7 @@ class MapAgent:
         return since + 1 >= self.cfg.goal_patience_steps
 
     def _plan(self, sem_map: SemanticMap, goal, kind: str, last_move: float | None):
-        if kind == "target" and self.sim.success_rule == "semexp":
+        if kind == "target" and self.config.task.success_rule == "semexp":
             # That rule measures straight-line distance, through walls: head for the nearest cell
             # within stop distance of the target, which may be the far side of its room's wall
             # (Pinesdale: a TV seen through a doorway sent the agent round the house's outside).
@@ -426,7 +334,7 @@ class MapAgent:
             return None
         depth, semantic = self._frame
         return far_sighting(sem_map, depth, semantic, self.categories.index(self.goal) + 1,
-                            self._mapper.intrinsics.focal_px, self.cfg.map.max_depth_m / sem_map.resolution_m,
+                            self._mapper.intrinsics.focal_px, self.sim.max_depth_m / sem_map.resolution_m,
                             (self.cfg.glimpse_min_fraction, self.cfg.glimpse_max_fraction), self._blocked,
                             self.cfg.blocked_radius_m / sem_map.resolution_m)
 
@@ -443,8 +351,8 @@ class MapAgent:
         depth, semantic = (obs.depth, obs.semantic) if factor == 1 else downsample_frame(obs.depth, obs.semantic, factor)
         semantic = self.noise(semantic)
         if self._mapper is None or self._frame_shape != depth.shape:
-            intr = CameraIntrinsics.from_sim(self.sim, depth.shape[0], depth.shape[1])
-            self._mapper = SemanticMapper(self.cfg.map, intr, self.categories)
+            self._mapper = SemanticMapper.for_sim(self.config.map, self.sim, depth.shape[0], depth.shape[1],
+                                                  self.categories)
             self._mapper.reset(self._start)
             self._frame_shape = depth.shape
         self._frame = (depth, semantic)
@@ -482,7 +390,7 @@ class MapAgent:
                             [min(rows[-1] + 1, last), min(cols[-1] + 1, last)]])
         field_ = self.planner.distance_from_agent(sem_map.obstacle, sem_map.agent_cell, targets=corners).full()
         return extract_frontiers(sem_map.explored, sem_map.obstacle, sem_map.agent_cell, field_,
-                                 sem_map.categories, sem_map.category_names, self.cfg.frontier,
+                                 sem_map.categories, sem_map.category_names, self.config.frontiers, resolution_m=sem_map.resolution_m,
                                  blocked=np.array(self._blocked, dtype=np.int64).reshape(-1, 2),
                                  blocked_radius_cells=self._blocked_radii(sem_map.resolution_m),
                                  agent_heading=sem_map.agent_heading)

@@ -1,4 +1,4 @@
-"""``l3mvn`` command line: eval, scenes, episodes, render.
+"""``l3mvn`` command line: eval, scenes, episodes, render, config.
 
 Every user error is one line on stderr (``error: ...``) and exit status 2; no traceback.
 """
@@ -9,9 +9,11 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
-from l3mvn.config import SUCCESS_RULES, SimConfig, override
+from l3mvn.config import SUCCESS_RULES, Config, PolicyConfig, TaskConfig, config_dict, config_hash, override
 from l3mvn.errors import L3MVNError
 
 
@@ -40,8 +42,9 @@ def _add_sim_args(p: argparse.ArgumentParser) -> None:
                    help="success rule (default: SemExp's Gibson rule, as in the paper's table)")
     p.add_argument("--frame", type=_frame, default=None, metavar="HxW",
                    help="render size (default 480x640; 120x160 is what the mapper consumes)")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                   help="override any SimConfig field, e.g. --set max_steps=300")
+    p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                   help="override any config field, e.g. --set sim.max_steps=300 or --set agent.replan_every=5 "
+                        "(`l3mvn config` lists them all)")
 
 
 def _add_source_args(p: argparse.ArgumentParser) -> None:
@@ -51,15 +54,29 @@ def _add_source_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed for procedural houses, episodes and policies")
 
 
-def _sim_config(args: argparse.Namespace) -> SimConfig:
-    cfg = SimConfig(success_rule=args.rule)
+def _config(args: argparse.Namespace, policy: PolicyConfig | None = None) -> Config:
+    """The config tree from the flags: ``--rule``, ``--frame`` and the policy flags first, then every
+    ``--set`` on top (so a ``--set`` wins over the flag it repeats)."""
+    cfg = Config(task=TaskConfig(success_rule=args.rule), policy=policy or PolicyConfig())
     if args.frame:
         cfg = cfg.with_frame(*args.frame)
-    return override(cfg, args.set)
+    cfg = override(cfg, args.set)
+    cfg.agent.downsample_factor(cfg.sim.frame_height, cfg.sim.frame_width)
+    return cfg
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from l3mvn.policies import POLICY_NAMES
+@dataclass(frozen=True)
+class Command:
+    """A subcommand contributed from above the library (the dashboard's ``serve``), so the library
+    never imports the application that uses it."""
+
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentParser:
+    from l3mvn.registry import POLICY_NAMES
 
     parser = argparse.ArgumentParser(prog="l3mvn", description="L3MVN Studio: language-guided ObjectNav")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -93,8 +110,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_source_args(sc)
     sc.add_argument("--rule", choices=SUCCESS_RULES, default="semexp", help="audit: success rule")
     sc.add_argument("--frame", default=None, metavar="HxW", help="audit: render size (default 480x640)")
-    sc.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
-                    help="audit: override a SimConfig field")
+    sc.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                    help="audit: override a config field")
     sc.add_argument("--scene", default=None, help="audit: only this scene")
     sc.add_argument("--workers", type=_positive, default=2, help="audit: floors audited in parallel (default 2)")
     sc.add_argument("--json", action="store_true", help="audit: print the JSON report instead of the table")
@@ -111,10 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
     gen.add_argument("--min-distance", type=float, default=1.0, help="min geodesic start distance, m")
     gen.add_argument("--max-distance", type=float, default=30.0, help="max geodesic start distance, m")
 
-    from app.cli import add_arguments as add_serve_arguments
     from l3mvn.recording import add_replay_arguments
 
-    add_serve_arguments(sub.add_parser("serve", help="the live web dashboard (viser)"))
+    for name, command in (extra or {}).items():
+        command.add_arguments(sub.add_parser(name, help=command.help))
     add_replay_arguments(sub.add_parser("replay", help="open a rerun recording (.rrd) in the rerun viewer"))
 
     lang = sub.add_parser("language", help="co-occurrence statistics behind the language prior")
@@ -131,6 +148,10 @@ def build_parser() -> argparse.ArgumentParser:
     th.add_argument("--epochs", type=_positive, default=60)
     th.add_argument("--seed", type=int, default=0)
 
+    cf = sub.add_parser("config", help="every setting of the config tree, with --set applied, and its hash")
+    _add_sim_args(cf)
+    cf.add_argument("--json", action="store_true", help="print the tree as JSON")
+
     rd = sub.add_parser("render", help="write RGB | depth | semantic of one view side by side to a PNG")
     _add_source_args(rd)
     _add_sim_args(rd)
@@ -142,10 +163,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+def main(argv: list[str] | None = None, extra: dict[str, Command] | None = None) -> int:
+    """``l3mvn``: the library's commands plus ``extra`` ones (the installed script adds ``serve``)."""
+    parser = build_parser(extra)
     args = parser.parse_args(argv)
     try:
+        if extra and args.command in extra:
+            return extra[args.command].run(args)
         if args.command == "eval":
             return _cmd_eval(args)
         if args.command == "scenes":
@@ -154,10 +178,8 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_generate(args)
         if args.command == "render":
             return _cmd_render(args)
-        if args.command == "serve":
-            from app.cli import run as run_serve
-
-            return run_serve(args)
+        if args.command == "config":
+            return _cmd_config(args)
         if args.command == "replay":
             from l3mvn.recording import run_replay
 
@@ -204,17 +226,14 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 
 def _cmd_audit(args: argparse.Namespace) -> int:
-    from l3mvn.agent import AgentConfig
     from l3mvn.eval.audit import audit_scenes, format_report, load_split_for_audit
 
-    cfg = SimConfig(success_rule=args.rule)
     if args.frame is not None:
         try:
-            cfg = cfg.with_frame(*_frame(args.frame))
+            args.frame = _frame(args.frame)
         except argparse.ArgumentTypeError as exc:
             raise L3MVNError(f"--frame: {exc}") from None
-    cfg = override(cfg, args.set)
-    AgentConfig().downsample_factor(cfg.frame_height, cfg.frame_width)
+    cfg = _config(args)
     if args.dataset is None:
         source, split, episodes = "procedural", "-", []
         _, scenes = _scenes(args)
@@ -280,8 +299,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from l3mvn.eval.backends import run_local
     from l3mvn.eval.job import EvalJob, is_error_row
     from l3mvn.eval.metrics import format_summary, summarize
-    from l3mvn.eval.runner import ResultWriter, check_resumable, done_keys, read_results
-    from l3mvn.policies import PolicyOptions, check_options
+    from l3mvn.eval.results import ResultWriter, check_resumable, done_keys, read_results
 
     if args.address and args.backend != "ray":
         raise L3MVNError("--address joins a Ray cluster: add --backend ray")
@@ -290,12 +308,10 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
         if args.scorer not in scorer_names():
             raise L3MVNError(f"unknown scorer {args.scorer!r}; valid scorers: {', '.join(scorer_names())}")
-    cfg = _sim_config(args)
+    cfg = _config(args, PolicyConfig(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise))
     check_resumable(args.out, args.resume)
-    options = PolicyOptions(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise)
-    check_options(args.policy, options)
     job = EvalJob.create(args.dataset, args.split, houses=args.houses, episodes_per_house=args.episodes_per_house,
-                         seed=args.seed, sim=cfg, policy=args.policy, options=options,
+                         seed=args.seed, config=cfg, policy=args.policy,
                          record_dir=args.record_dir if args.record else None)
     eset = job.load()
     episodes = eset.episodes[: args.episodes] if args.episodes else eset.episodes
@@ -305,7 +321,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     todo = [ep.key for ep in episodes if ep.key not in skip]
     results = {r["key"]: r for r in previous if r["key"] in skip and "error" not in r}
     print(f"{eset.name}/{eset.split}: {len(episodes)} episodes, {len(todo)} to run, policy {args.policy}, "
-          f"rule {cfg.success_rule}, config {job.config_hash}", file=sys.stderr)
+          f"rule {cfg.task.success_rule}, config {job.config_hash}", file=sys.stderr)
     if args.backend == "ray":
         from l3mvn.eval.ray_backend import run_ray
 
@@ -387,6 +403,19 @@ def _cmd_train_head(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_config(args: argparse.Namespace) -> int:
+    cfg = _config(args)
+    tree = config_dict(cfg)
+    if args.json:
+        print(json.dumps(tree, indent=1, sort_keys=True))
+        return 0
+    for section, fields in tree.items():
+        for name, value in fields.items():
+            print(f"{section}.{name} = {value}")
+    print(f"hash (without policy name and seed): {config_hash(cfg)}")
+    return 0
+
+
 def _cmd_render(args: argparse.Namespace) -> int:
     import numpy as np
     from PIL import Image
@@ -394,11 +423,11 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from l3mvn.scenes.semexp import pick_floor
     from l3mvn.sim.render import Renderer
     from l3mvn.sim.simulator import random_walkable_pose
-    from l3mvn.sim.types import Pose
+    from l3mvn.types import Pose
     from l3mvn.sim.world import build_world
     from l3mvn.viz import colorize_depth, colorize_semantic, side_by_side
 
-    cfg = _sim_config(args)
+    cfg = _config(args).sim
     source, scenes = _scenes(args)
     name = args.scene or sorted(scenes)[0]
     scene = pick_floor(scenes, name, args.floor, where=str(source))

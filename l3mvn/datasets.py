@@ -5,13 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from l3mvn.config import SimConfig
+from l3mvn.config import Config
 from l3mvn.episodes import generate_episodes, read_episodes
 from l3mvn.errors import L3MVNError
 from l3mvn.scenes.procedural import procedural_split
 from l3mvn.scenes.scene import SceneMap
 from l3mvn.scenes.semexp import load_split
-from l3mvn.sim.types import Episode
+from l3mvn.types import Episode
 
 PROCEDURAL = "procedural"
 
@@ -36,7 +36,7 @@ def load_episode_set(
     houses: int = 5,
     episodes_per_house: int = 10,
     seed: int = 0,
-    cfg: SimConfig | None = None,
+    cfg: Config | None = None,
 ) -> EpisodeSet:
     """A SemExp dataset's split with its episode files, or (``dataset=None``) procedural houses with
     generated episodes, seeded so the same arguments always give the same set."""

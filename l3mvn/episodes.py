@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage as ndi
 
-from l3mvn.config import SimConfig
+from l3mvn.config import Config
 from l3mvn.errors import L3MVNError
-from l3mvn.eval.geodesic import goal_region
+from l3mvn.task.regions import goal_region
 from l3mvn.scenes.scene import GOAL_CATEGORIES, SceneMap
-from l3mvn.sim.types import Episode, Pose
+from l3mvn.types import Episode, Pose
 
 
 def episode_file(dataset: str | Path, split: str, scene: str) -> Path:
@@ -123,7 +123,7 @@ def generate_episodes(
     scene: SceneMap,
     count: int,
     seed: int = 0,
-    cfg: SimConfig | None = None,
+    cfg: Config | None = None,
     goals: tuple[str, ...] = GOAL_CATEGORIES,
     min_distance_m: float = 1.0,
     max_distance_m: float = 30.0,
@@ -134,7 +134,7 @@ def generate_episodes(
     Deterministic for (scene name, floor, seed): goals cycle through those present in random order,
     starts are drawn uniformly among qualifying navmesh cells.
     """
-    cfg = cfg or SimConfig()
+    cfg = cfg or Config()
     rng = np.random.default_rng([seed, zlib.crc32(scene.key.encode())])
     present = [g for g in goals if g in scene.present_goals(goals)]
     candidates: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}

@@ -12,7 +12,7 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from l3mvn.sim.types import Action, Observation, Pose
+from l3mvn.types import Action, Observation, Pose
 
 log = logging.getLogger(__name__)
 

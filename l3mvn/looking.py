@@ -15,7 +15,7 @@ import numpy as np
 
 from l3mvn.mapping import SemanticMap
 from l3mvn.planning import LocalPlanner
-from l3mvn.sim.types import Action
+from l3mvn.types import Action
 
 Cell = tuple[int, int]
 

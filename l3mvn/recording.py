@@ -40,7 +40,7 @@ from rerun.chunk import RrdReader
 
 from l3mvn.errors import L3MVNError
 from l3mvn.events import EventBus, StepEvent
-from l3mvn.sim.types import Episode
+from l3mvn.types import Episode
 from l3mvn.viz import BACKGROUND_RGB, category_palette
 
 log = logging.getLogger(__name__)

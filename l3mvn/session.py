@@ -7,52 +7,64 @@ mid-episode (a new, clearly marked segment) and hand the policy a manual long-te
 from __future__ import annotations
 
 import time
-from collections import deque
 from dataclasses import replace
-
-import numpy as np
+from typing import Protocol, runtime_checkable
 
 from l3mvn.errors import L3MVNError
-from l3mvn.eval.metrics import EpisodeOutcome, EpisodeResult, score_episode
 from l3mvn.events import Decision, EventBus, StepEvent
-from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.sim.types import Action, Episode, Observation
-
-# The target counts as seen once this fraction of a frame shows it with valid depth.
-SEEN_FRACTION = 0.001
-COLLISION_WINDOW = 50
+from l3mvn.sim.base import Environment
+from l3mvn.types import Action, Episode, Observation
+from l3mvn.task import EpisodeMeasures, EpisodeOutcome, EpisodeResult, ObjectNavTask, score_episode
 
 
-def target_visible(obs: Observation) -> bool:
-    visible = np.count_nonzero((obs.semantic == obs.goal_id) & (obs.depth > 0))
-    return visible >= SEEN_FRACTION * obs.semantic.size
+class Policy(Protocol):
+    """What the session drives: ``act`` returns an Action, or a Decision that explains itself."""
+
+    stuck: bool  # the policy's own "I am stuck" signal (a failure cause)
+
+    def reset(self, episode: Episode) -> None: ...
+
+    def act(self, obs: Observation) -> Action | Decision: ...
+
+    def change_target(self, goal: str) -> None: ...
+
+
+@runtime_checkable
+class Steerable(Protocol):
+    """A policy that takes a researcher's commands mid-episode (the map-based agent)."""
+
+    def set_manual_goal(self, cell: tuple[int, int] | None) -> None: ...
+
+    def set_scorer(self, name: str) -> None: ...
 
 
 class EpisodeSession:
     """Drives one episode. Policies return an Action or a Decision (map-based agents explain
-    themselves); every step is published on ``bus`` as a StepEvent."""
+    themselves); every step is published on ``bus`` as a StepEvent. ``task`` judges it."""
 
-    def __init__(self, env: BuiltinSimulator, policy, *, policy_name: str, config_hash: str,
+    def __init__(self, env: Environment, task: ObjectNavTask, policy: Policy, *, policy_name: str, config_hash: str,
                  bus: EventBus | None = None) -> None:
-        self.env, self.policy = env, policy
+        self.env, self.task, self.policy = env, task, policy
         self.policy_name, self.config_hash = policy_name, config_hash
         self.bus = bus or EventBus()
         self.episode: Episode | None = None
         self.segment = 0
         self.last_event: StepEvent | None = None
         self._result: EpisodeResult | None = None
+        # Seconds spent inside the environment's reset/step (rendering included) this episode.
+        self.sim_seconds = 0.0
 
     # --- lifecycle ---------------------------------------------------------------------------
     def start(self, episode: Episode) -> StepEvent:
         self._t0 = time.perf_counter()
         self.episode, self.segment, self._result = episode, 0, None
+        self.task.region(episode.goal)  # an absent goal is refused before the agent is placed
+        t0 = time.perf_counter()
         obs = self.env.reset(episode)
+        self.sim_seconds = time.perf_counter() - t0
         self.policy.reset(episode)
         self._obs = obs
-        self._saw = target_visible(obs)
-        self._confirmed = False
-        self._entered = self.env.in_success_region()
-        self._forwards: deque[bool] = deque(maxlen=COLLISION_WINDOW)
+        self.measures = EpisodeMeasures(self.task, episode, obs)
         return self._publish(obs, None, None)
 
     @property
@@ -66,12 +78,10 @@ class EpisodeSession:
             raise L3MVNError(f"episode {self.episode.key} is over: reset to start another")
         out = self.policy.act(self._obs)
         decision = out if isinstance(out, Decision) else Decision(action=Action.parse(out))
+        t0 = time.perf_counter()
         obs = self.env.step(decision.action)
-        if decision.action == Action.MOVE_FORWARD:
-            self._forwards.append(obs.collided)
-        self._saw = self._saw or target_visible(obs)
-        self._confirmed = self._confirmed or decision.target_seen
-        self._entered = self._entered or self.env.in_success_region()
+        self.sim_seconds += time.perf_counter() - t0
+        self.measures.update(obs, decision.action, decision.target_seen)
         self._obs = obs
         if self.env.done:
             self._result = self._score()
@@ -93,29 +103,41 @@ class EpisodeSession:
         """Keep walking from here toward a new target: a new segment of the same episode."""
         if self.episode is None or self.env.done:
             raise L3MVNError("no running episode to retarget")
-        if goal not in self.env.scene.present_goals():
-            raise L3MVNError(
-                f"target {goal!r} is not in {self.env.scene.key}; present: {', '.join(self.env.scene.present_goals())}"
-            )
+        scene = self.task.scene
+        if goal not in scene.present_goals():
+            raise L3MVNError(f"target {goal!r} is not in {scene.key}; present: {', '.join(scene.present_goals())}")
+        self.task.region(goal)
         self.env.set_goal(goal)
         self.episode = replace(self.episode, goal=goal)
         self.segment += 1
-        if hasattr(self.policy, "change_target"):
-            self.policy.change_target(goal)
+        self.policy.change_target(goal)
         self._obs = replace(self._obs, goal=goal)
-        self._saw = target_visible(self._obs)
-        self._confirmed = False
-        self._entered = self.env.in_success_region()
+        self.measures.retarget(self.episode, self._obs)
         return self._publish(self._obs, None, None)
+
+    def set_manual_goal(self, cell: tuple[int, int] | None) -> None:
+        """Make a cell of the agent's map its long-term goal until reached (None clears it)."""
+        if self.episode is None or self.env.done:
+            raise L3MVNError("no running episode: reset first")
+        self._steerable("manual goals").set_manual_goal(cell)
+
+    def set_scorer(self, name: str) -> None:
+        """Swap the language scorer of a language policy from the next frontier choice on."""
+        self._steerable("a language scorer").set_scorer(name)
+
+    def _steerable(self, what: str) -> Steerable:
+        if not isinstance(self.policy, Steerable):
+            raise L3MVNError(f"policy {self.policy_name!r} takes no {what}: only map-based policies do")
+        return self.policy
 
     # --- internals ---------------------------------------------------------------------------
     def _ground_truth(self) -> dict[str, float]:
-        env = self.env
+        env, task, ep = self.env, self.task, self.episode
         return {
-            "distance_to_goal_m": env.distance_to_goal(),
+            "distance_to_goal_m": task.distance_to_goal(env.pose, ep.goal),
             "path_length_m": env.path_length_m,
-            "shortest_path_m": env.shortest_path_length(),
-            "in_success_region": float(env.in_success_region()),
+            "shortest_path_m": task.shortest_path_length(ep),
+            "in_success_region": float(task.in_success_region(env.pose, ep.goal)),
         }
 
     def _publish(self, obs: Observation, decision: Decision | None, action: Action | None) -> StepEvent:
@@ -133,20 +155,15 @@ class EpisodeSession:
     def _score(self) -> EpisodeResult:
         env, ep = self.env, self.episode
         assert ep is not None
-        f = self._forwards
-        outcome = EpisodeOutcome(
-            stopped=env.stopped, in_success_region=env.in_success_region(), steps=env.steps,
-            path_length_m=env.path_length_m, shortest_path_m=env.shortest_path_length(),
-            final_distance_m=env.distance_to_goal(), saw_target=self._saw, entered_region=self._entered,
-            recent_collision_rate=(sum(f) / len(f)) if len(f) >= 10 else 0.0,
-            agent_reported_stuck=bool(getattr(self.policy, "stuck", False)),
-            coverage=self._coverage(),
-        )
-        success, spl, dtg, cause = score_episode(outcome)
+        # The map of the last published decision (map-based agents keep one map and update it).
+        decision = self.last_event.decision if self.last_event is not None else None
+        outcome = self.measures.outcome(env, agent_reported_stuck=self.policy.stuck,
+                                        sem_map=decision.map if decision is not None else None)
+        success, spl, dtg, cause = score_episode(outcome, self.task.cfg.task)
         return EpisodeResult(
             key=ep.key, scene=ep.scene, floor=ep.floor, episode_id=ep.episode_id, goal=ep.goal,
             policy=self.policy_name, success=success, spl=spl, dtg=dtg, failure=cause, steps=env.steps,
-            path_length_m=env.path_length_m, shortest_path_m=outcome.shortest_path_m, rule=env.cfg.success_rule,
+            path_length_m=env.path_length_m, shortest_path_m=outcome.shortest_path_m, rule=self.task.rule,
             config_hash=self.config_hash, seconds=time.perf_counter() - self._t0,
             extra=self._extra(outcome),
         )
@@ -157,18 +174,5 @@ class EpisodeSession:
             # Map-based agents: whether the map ever confirmed the target (>= target_min_cells), which
             # tells a target glimpsed but never confirmed from one confirmed but not reached.
             extra["coverage"] = round(outcome.coverage, 3)
-            extra["confirmed"] = self._confirmed
+            extra["confirmed"] = self.measures.confirmed
         return extra
-
-    def _coverage(self) -> float | None:
-        """Ground truth for the failure analysis: the share of the floor reachable from the start
-        that the agent's own map marks explored. None when the policy keeps no map or the backend
-        has no ground-truth floor to measure against (``reachable_cells``, built-in simulator only)."""
-        decision = self.last_event.decision if self.last_event is not None else None
-        sem_map = decision.map if decision is not None else None
-        reachable = getattr(self.env, "reachable_cells", None)
-        if sem_map is None or self.episode is None or reachable is None:
-            return None
-        rows, cols = reachable(self.episode.start)
-        xs, ys = self.env.scene.cell_center(rows, cols)
-        return float(sem_map.explored_at(xs, ys).mean()) if len(rows) else None

@@ -12,14 +12,15 @@ import math
 import numpy as np
 import pytest
 
-from l3mvn.agent import AgentConfig, MapAgent
-from l3mvn.config import SimConfig
+from l3mvn.agent import MapAgent
+from l3mvn.config import AgentConfig, Config, SimConfig, TaskConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.mapping import SemanticMap
 from l3mvn.policies.global_policies import NearestFrontier
 from l3mvn.session import EpisodeSession
+from l3mvn.task import ObjectNavTask
 from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.sim.types import Action, Episode, Pose
+from l3mvn.types import Action, Episode, Pose
 
 MAX_STEPS = 300
 START = Pose(x=2.5, y=2.0, heading=math.pi)  # west room, facing away from the door
@@ -32,7 +33,12 @@ def env(tiny_scene):
 
 
 def _agent(env, **overrides) -> MapAgent:
-    return MapAgent(NearestFrontier(), env.categories, env.cfg, AgentConfig(**overrides))
+    return MapAgent(NearestFrontier(), env.categories, _tree(env, agent=AgentConfig(**overrides)))
+
+
+def _tree(env, **sections) -> Config:
+    """The config tree of ``env``'s simulator with the given sections."""
+    return Config(sim=env.cfg, **sections)
 
 
 def _episode(goal: str = "toilet", start: Pose = START) -> Episode:
@@ -40,7 +46,7 @@ def _episode(goal: str = "toilet", start: Pose = START) -> Episode:
 
 
 def _run(env, agent, episode):
-    session = EpisodeSession(env, agent, policy_name="frontier", config_hash="t")
+    session = EpisodeSession(env, ObjectNavTask(env.scene, _tree(env)), agent, policy_name="frontier", config_hash="t")
     session.start(episode)
     events = []
     while not session.done:
@@ -104,7 +110,7 @@ def test_a_single_noisy_goal_cell_is_looked_at_from_other_sides_then_set_aside(e
 def test_manual_goal_is_followed_recorded_and_cleared_once_reached(env):
     agent = _agent(env, look_around_steps=0)
     episode = _episode("toilet")
-    session = EpisodeSession(env, agent, policy_name="frontier", config_hash="t")
+    session = EpisodeSession(env, ObjectNavTask(env.scene, _tree(env)), agent, policy_name="frontier", config_hash="t")
     session.start(episode)
     session.step()
     row, col = agent._mapper.map.agent_cell
@@ -147,7 +153,7 @@ def test_reached_frontiers_are_not_chosen_again(env):
 def test_random_sample_keeps_its_goal_until_reached_while_frontier_policies_reselect(env):
     from l3mvn.policies.global_policies import RandomSample
 
-    agent = MapAgent(RandomSample(), env.categories, env.cfg, AgentConfig())
+    agent = MapAgent(RandomSample(), env.categories, _tree(env))
     episode = _episode()
     obs = env.reset(episode)
     agent.reset(episode)
@@ -201,7 +207,7 @@ def _walled_target_map(agent_cell):
 
 @pytest.mark.parametrize("rule", ["semexp", "geodesic"])
 def test_a_target_behind_a_wall_is_approached_as_the_success_rule_measures(rule):
-    agent = MapAgent(NearestFrontier(), ("toilet",), SimConfig(success_rule=rule), AgentConfig())
+    agent = MapAgent(NearestFrontier(), ("toilet",), Config(task=TaskConfig(success_rule=rule)))
     far = agent._plan(*_walled_target_map((50, 60)), "target", None)
     beside_wall = agent._plan(*_walled_target_map((50, 97)), "target", None)
     if rule == "semexp":
@@ -240,8 +246,8 @@ def test_a_target_the_agent_cannot_get_closer_to_is_stopped_at_within_the_succes
 def test_stop_distances_are_checked_against_each_other_and_the_success_distance(env):
     with pytest.raises(L3MVNError, match="stop_distance_m <= blocked_stop_distance_m"):
         AgentConfig(stop_distance_m=0.95, blocked_stop_distance_m=0.9)
-    with pytest.raises(L3MVNError, match="below the success distance"):
-        MapAgent(NearestFrontier(), env.categories, env.cfg, AgentConfig(blocked_stop_distance_m=1.0))
+    with pytest.raises(L3MVNError, match="must be below task.success_distance_m"):
+        _tree(env, agent=AgentConfig(blocked_stop_distance_m=1.0))
 
 
 def test_frontier_oracle_heads_for_the_frontier_nearest_the_goal_and_succeeds(env):
@@ -249,10 +255,11 @@ def test_frontier_oracle_heads_for_the_frontier_nearest_the_goal_and_succeeds(en
 
     from l3mvn.policies.oracle import object_distances
 
-    oracle = FrontierOracle(env)
-    result, events = _run(env, MapAgent(oracle, env.categories, env.cfg, AgentConfig()), _episode())
+    task = ObjectNavTask(env.scene, _tree(env))
+    oracle = FrontierOracle(task)
+    result, events = _run(env, MapAgent(oracle, env.categories, _tree(env)), _episode())
     assert result.success, result.failure
-    region = object_distances(env, "toilet")
+    region = object_distances(task, "toilet")
     checked = 0
     for event, _ in events:
         d = event.decision
@@ -275,10 +282,10 @@ def test_the_frontier_oracle_measures_to_the_object_not_through_the_wall_to_its_
     from l3mvn.policies.oracle import object_distances
 
     scene = _corridor_with_side_room(toilet=(slice(28, 36), slice(112, 119)))
-    env = BuiltinSimulator(scene, SimConfig().with_frame(60, 80))
+    task = ObjectNavTask(scene, Config(sim=SimConfig().with_frame(60, 80)))
     below = scene.cell_center(53, 116)  # corridor, under the toilet
-    assert env.region("toilet").distance_at(*below) == 0.0
-    assert object_distances(env, "toilet").distance_at(*below) > 1.0
+    assert task.region("toilet").distance_at(*below) == 0.0
+    assert object_distances(task, "toilet").distance_at(*below) > 1.0
 
 
 def _corridor_with_side_room(toilet=(slice(10, 20), slice(82, 92))):
@@ -358,15 +365,15 @@ def test_a_target_seen_beyond_the_depth_range_is_walked_towards_until_it_maps(en
     bearing = (bearing + math.pi) % (2 * math.pi) - math.pi
     half_fov = math.radians(env.cfg.hfov_deg) / 2
     assert -half_fov < bearing < -0.6 * half_fov  # to the right (clockwise), near the view's edge
-    assert math.hypot(gr - r, gc - c) * d.map.resolution_m == pytest.approx(agent.cfg.map.max_depth_m, abs=0.1)
+    assert math.hypot(gr - r, gc - c) * d.map.resolution_m == pytest.approx(agent.sim.max_depth_m, abs=0.1)
     # The same pixels with depth are an ordinary candidate: nothing to walk towards blindly.
     agent.reset(episode)
     assert agent.act(dataclasses.replace(obs, semantic=semantic)).goal_kind != "glimpse"
 
 
 def test_looking_settings_are_checked_with_one_line_errors(env):
-    with pytest.raises(L3MVNError, match="half the turn angle"):
-        MapAgent(NearestFrontier(), env.categories, env.cfg, AgentConfig(look_tolerance_deg=10.0))
+    with pytest.raises(L3MVNError, match="must be >= half of sim.turn_angle_deg"):
+        _tree(env, agent=AgentConfig(look_tolerance_deg=10.0))
     with pytest.raises(L3MVNError, match="frontier_press_m"):
         AgentConfig(frontier_press_m=0.8)
     with pytest.raises(L3MVNError, match="viewpoint distances"):

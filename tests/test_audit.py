@@ -11,15 +11,15 @@ import pytest
 from scipy import ndimage as ndi
 
 from l3mvn.cli import main
-from l3mvn.config import SimConfig
+from l3mvn.config import Config
 from l3mvn.eval.audit import REASONS, AuditConfig, FloorAuditor, audit_floor, audit_split
-from l3mvn.eval.geodesic import footprint_region, goal_region
+from l3mvn.task.regions import footprint_region, goal_region
 from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap, disk
 from l3mvn.sim.world import World, build_world
 
 from conftest import draw_two_room_house
 
-CFG = SimConfig().with_frame(120, 160)
+CFG = Config().with_frame(120, 160)
 DEV = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "gibson_semexp"
 
 
@@ -52,7 +52,7 @@ def test_objects_standing_in_open_floor_are_confirmable_with_pixels():
     for inst in floor.instances:
         assert inst.confirmable and inst.reason is None, inst
         assert inst.max_pixels > 0 and inst.max_mapped_cells > 0
-        assert inst.nearest_confirmable_m is not None and inst.nearest_confirmable_m <= CFG.success_distance_m
+        assert inst.nearest_confirmable_m is not None and inst.nearest_confirmable_m <= CFG.task.success_distance_m
         assert inst.confirmed_components and inst.best_pose is not None
 
 
@@ -70,9 +70,9 @@ def test_an_object_walled_in_is_occluded():
     # A 3-cell wall box around the toilet, tied to the outer wall (else it would be low furniture).
     ring = [(28, 31, 28, 52), (49, 52, 28, 52), (28, 52, 28, 31), (28, 52, 49, 52), (0, 28, 39, 41)]
     scene = draw([(4, 76, 4, 76)], {"toilet": [(36, 44, 36, 44)]}, walls=ring)
-    walled = build_world(draw([(4, 76, 4, 76)], {}, walls=ring), CFG)
+    walled = build_world(draw([(4, 76, 4, 76)], {}, walls=ring), CFG.sim)
     assert walled.walls[29, 40] and walled.walls[40, 29] and walled.walls[50, 40]
-    world = _merge(walled, build_world(scene, CFG), category=GIBSON_CATEGORIES.index("toilet") + 1)
+    world = _merge(walled, build_world(scene, CFG.sim), category=GIBSON_CATEGORIES.index("toilet") + 1)
     inst = only(FloorAuditor(scene, CFG, world=world).run(), "toilet")
     assert inst.reachable_region_cells > 0 and inst.max_pixels == 0 and inst.poses_tested > 1
     assert not inst.confirmable and inst.reason == "occluded"
@@ -163,7 +163,7 @@ def test_every_dev_goal_instance_is_confirmable_or_has_a_reason():
     assert len(report.floors) == 25 and len(insts) > 300
     for inst in insts:
         if inst.confirmable:
-            assert inst.reason is None and inst.nearest_confirmable_m <= CFG.success_distance_m, inst
+            assert inst.reason is None and inst.nearest_confirmable_m <= CFG.task.success_distance_m, inst
         else:
             assert inst.reason in REASONS, inst
     # The world builder erases, buries and hides none of them: what is left lacks floor or a path.

@@ -106,3 +106,24 @@ def test_an_interrupted_eval_still_summarises_what_finished(tiny_dataset, tmp_pa
     assert json.loads(captured.out.strip().splitlines()[-1])["episodes"] == 2
     assert "summary of the 2 of 8 episodes finished" in captured.err
     assert len(out.read_text().splitlines()) == 2
+
+
+def test_set_agent_field_changes_the_hash_and_what_the_agent_does(tiny_dataset, tmp_path):
+    rows = {}
+    for name, extra in (("default", []), ("no_look_around", ["--set", "agent.look_around_steps=0"])):
+        out = tmp_path / f"{name}.jsonl"
+        assert main(["eval", "--dataset", str(tiny_dataset), "--split", "val", "--policy", "frontier",
+                     "--frame", "60x80", "--episodes", "1", "--out", str(out), *extra]) == 0
+        rows[name] = json.loads(out.read_text().splitlines()[0])
+    assert rows["default"]["config_hash"] != rows["no_look_around"]["config_hash"]
+    assert rows["no_look_around"]["config"]["agent"]["look_around_steps"] == 0
+    assert rows["default"]["steps"] != rows["no_look_around"]["steps"]  # no initial 360-degree turn
+
+
+def test_config_lists_every_field_and_refuses_a_mistyped_one(capsys):
+    assert main(["config", "--set", "agent.replan_every=5"]) == 0
+    out = capsys.readouterr().out
+    assert "agent.replan_every = 5" in out and "task.success_rule = semexp" in out and "hash" in out
+    assert main(["config", "--set", "agent.replan_evry=5"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: unknown setting 'replan_evry' in section agent; valid:") and "\n" not in err

@@ -11,11 +11,11 @@ import pytest
 from app.server import start_dashboard
 from app.state import Notice
 from app.views import cell_to_xy, ray_to_cell
-from l3mvn.config import SimConfig
+from l3mvn.config import Config, SimConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.events import StepEvent
 
-SMALL = SimConfig().with_frame(120, 160)
+SMALL = Config(sim=SimConfig().with_frame(120, 160))
 
 
 def _free_port() -> int:
@@ -84,6 +84,21 @@ def test_run_steps_on_its_own_until_paused(ctl):
     n = len(ctl.events)
     time.sleep(0.2)
     assert n >= 4 and len(ctl.events) == n and not ctl.snapshot.running
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf"), "4", None, True])
+def test_a_speed_that_is_not_a_finite_number_is_refused_and_run_goes_on(ctl, bad):
+    _reset(ctl)
+    ctl.set_speed(40)
+    ctl.run()
+    with pytest.raises(L3MVNError, match="steps per second must be a number from 0.5 to 60"):
+        ctl.set_speed(bad)
+    assert ctl.steps_per_second == 40
+    n = len(ctl.events)
+    deadline = time.monotonic() + 5
+    while len(ctl.events) < n + 2 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert len(ctl.events) >= n + 2 or ctl.snapshot.event.done
 
 
 def test_step_while_run_is_active_is_refused_and_running_goes_on(ctl):
@@ -224,6 +239,7 @@ def test_a_click_ray_lands_on_the_map_cell_below_it():
     x, y = cell_to_xy((40, 25), 0.05)
     assert ray_to_cell((x, y, 10.0), (0.0, 0.0, -1.0), 0.05) == (40, 25)
     assert ray_to_cell((x, y, 10.0), (0.0, 0.0, 1.0), 0.05) is None  # looking away from the map
+    assert ray_to_cell((x, y, 1e308), (1e308, 0.0, -1e-300), 0.05) is None  # meets the plane at infinity
 
 
 def test_the_page_is_served(dash):

@@ -38,7 +38,7 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt inst
 
 from app.server import start_dashboard  # noqa: E402
 from app.views import cell_to_xy  # noqa: E402
-from l3mvn.config import SimConfig  # noqa: E402
+from l3mvn.config import Config  # noqa: E402
 
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
@@ -82,7 +82,7 @@ def _screen_point(page, client, x: float, y: float) -> tuple[float, float]:
 @pytest.fixture(scope="module")
 def dash():
     d = start_dashboard(port=_free_port(), houses=1, episodes_per_house=2, policy="frontier",
-                        cfg=SimConfig().with_frame(240, 320))
+                        cfg=Config().with_frame(240, 320))
     yield d
     d.stop()
 

@@ -5,14 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from l3mvn.config import SimConfig
+from l3mvn.config import Config
 from l3mvn.episodes import (
     episode_file, generate_episodes, read_episode_file, read_episodes, write_episode_file,
 )
 from l3mvn.errors import L3MVNError
-from l3mvn.eval.geodesic import goal_region
+from l3mvn.task.regions import goal_region
 from l3mvn.scenes.semexp import load_split
-from l3mvn.sim.types import Pose
+from l3mvn.types import Pose
 
 from conftest import GIBSON, needs_gibson
 
@@ -43,7 +43,7 @@ def test_generated_episodes_start_on_navmesh_with_reachable_goal_in_range(tiny_s
     for ep in eps:
         r, c = tiny_scene.cell_of(ep.start.x, ep.start.y)
         assert tiny_scene.navigable[r, c]
-        d = goal_region(tiny_scene, ep.goal, SimConfig()).distance_at(ep.start.x, ep.start.y)
+        d = goal_region(tiny_scene, ep.goal, Config()).distance_at(ep.start.x, ep.start.y)
         assert 1.0 <= d <= 30.0 and math.isclose(d, ep.geodesic_distance_m, abs_tol=1e-3)
     assert {ep.goal for ep in eps} == set(tiny_scene.present_goals())
 

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from l3mvn.errors import L3MVNError
-from l3mvn.frontiers import Frontier, FrontierConfig, extract_frontiers
+from l3mvn.config import FrontierConfig
+from l3mvn.frontiers import Frontier, extract_frontiers
 
 RES = 0.05
 
@@ -46,7 +47,7 @@ def extract(
     categories = categories or {}
     maps = np.stack(list(categories.values())) if categories else np.zeros((0, *shape), dtype=bool)
     distance = straight_line(shape, agent) if distance is None else distance
-    return extract_frontiers(explored, obstacle, agent, distance, maps, tuple(categories), cfg)
+    return extract_frontiers(explored, obstacle, agent, distance, maps, tuple(categories), cfg, resolution_m=RES)
 
 
 def corridor_open_at_right() -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
@@ -156,10 +157,10 @@ def test_blocked_frontiers_are_dropped_before_the_far_limit_so_far_ones_return()
     maps = np.zeros((0, *explored.shape), dtype=bool)
     distance = straight_line(explored.shape, agent)
     frontiers = extract_frontiers(explored, obstacle, agent, distance, maps, (), FrontierConfig(max_distance_m=2.0),
-                                  blocked=np.array([near.center]), blocked_radius_cells=20)
+                                  blocked=np.array([near.center]), blocked_radius_cells=20, resolution_m=RES)
     assert [f.center[1] for f in frontiers] == [90]
     with pytest.raises(L3MVNError, match="blocked"):
-        extract_frontiers(explored, obstacle, agent, distance, maps, (), blocked=np.array([1, 2, 3]))
+        extract_frontiers(explored, obstacle, agent, distance, maps, (), blocked=np.array([1, 2, 3]), resolution_m=RES)
 
 
 def test_each_blocked_cell_can_have_its_own_radius():
@@ -171,7 +172,7 @@ def test_each_blocked_cell_can_have_its_own_radius():
 
     def centres(radii):
         return [f.center[1] for f in extract_frontiers(explored, obstacle, agent, distance, maps, (),
-                                                       blocked=beside, blocked_radius_cells=radii)]
+                                                       blocked=beside, blocked_radius_cells=radii, resolution_m=RES)]
 
     assert centres(np.array([10.0])) == [90]  # the door lies within 10 cells: dropped
     assert centres(np.array([5.0])) == [10, 90]  # within a 5-cell radius only the done spot: kept
@@ -309,7 +310,7 @@ def test_to_dict_is_json_ready_and_summarises_cells():
         ({"min_distance_m": 6.0}, "min_distance_m < max_distance_m"),
         ({"top_k": 0}, "top_k"),
         ({"cu_lambda": -1.0}, "cu_lambda"),
-        ({"resolution_m": 0.0}, "resolution_m"),
+        ({"window_m": -1.0}, "window_m"),
     ],
 )
 def test_bad_config_values_raise_a_clear_error(change, message):
@@ -322,17 +323,17 @@ def test_bad_inputs_raise_a_clear_error():
     distance = straight_line(explored.shape, agent)
     none = np.zeros((0, *explored.shape), dtype=bool)
     with pytest.raises(L3MVNError, match="explored must be a 2-D bool array"):
-        extract_frontiers(explored.astype(np.float32), obstacle, agent, distance, none, ())
+        extract_frontiers(explored.astype(np.float32), obstacle, agent, distance, none, (), resolution_m=RES)
     with pytest.raises(L3MVNError, match="does not match"):
-        extract_frontiers(explored, obstacle[:-1], agent, distance, none, ())
+        extract_frontiers(explored, obstacle[:-1], agent, distance, none, (), resolution_m=RES)
     with pytest.raises(L3MVNError, match="distance_m must be a float array"):
-        extract_frontiers(explored, obstacle, agent, distance[:, :-1], none, ())
+        extract_frontiers(explored, obstacle, agent, distance[:, :-1], none, (), resolution_m=RES)
     with pytest.raises(L3MVNError, match="1 category names for 0"):
-        extract_frontiers(explored, obstacle, agent, distance, none, ("bed",))
+        extract_frontiers(explored, obstacle, agent, distance, none, ("bed",), resolution_m=RES)
     with pytest.raises(L3MVNError, match="outside"):
-        extract_frontiers(explored, obstacle, (60, 0), distance, none, ())
+        extract_frontiers(explored, obstacle, (60, 0), distance, none, (), resolution_m=RES)
     with pytest.raises(L3MVNError, match="at the agent cell"):
-        extract_frontiers(explored, obstacle, agent, straight_line(explored.shape, (0, 0)), none, ())
+        extract_frontiers(explored, obstacle, agent, straight_line(explored.shape, (0, 0)), none, (), resolution_m=RES)
 
 
 def test_turn_cost_makes_the_frontier_ahead_cheaper_than_an_equally_near_one_behind():
@@ -343,7 +344,7 @@ def test_turn_cost_makes_the_frontier_ahead_cheaper_than_an_equally_near_one_beh
     cfg = FrontierConfig(turn_cost_m_per_rad=0.5)
     shape = explored.shape
     facing_right = extract_frontiers(explored, obstacle, agent, straight_line(shape, agent),
-                                     np.zeros((0, *shape), bool), (), cfg, agent_heading=0.0)
+                                     np.zeros((0, *shape), bool), (), cfg, agent_heading=0.0, resolution_m=RES)
     by_side = {f.center[1]: f for f in facing_right}
     assert by_side[90].cost == pytest.approx(by_side[90].distance_m)
     assert by_side[10].cost == pytest.approx(by_side[10].distance_m + 0.5 * np.pi, abs=0.05)

@@ -2,7 +2,8 @@ import numpy as np
 
 from l3mvn.frontiers import Frontier
 from l3mvn.mapping import SemanticMap
-from l3mvn.policies import PolicyOptions, check_options
+from l3mvn.config import PolicyConfig
+from l3mvn.registry import check_options
 from l3mvn.policies.global_policies import CostUtility, NearestFrontier, RandomSample
 from l3mvn.errors import L3MVNError
 
@@ -67,7 +68,7 @@ def test_random_sample_prefers_unknown_cells_next_to_explored_floor():
 
 def test_options_a_policy_would_ignore_are_refused():
     with pytest.raises(L3MVNError, match="apply to language policies only"):
-        check_options("frontier", PolicyOptions(scorer="roomtype"))
+        check_options("frontier", PolicyConfig(scorer="roomtype"))
     with pytest.raises(L3MVNError, match="does not read the semantic frames"):
-        check_options("oracle", PolicyOptions(seg_noise=0.1))
-    check_options("exp+llm", PolicyOptions(selection="official_code"))
+        check_options("oracle", PolicyConfig(seg_noise=0.1))
+    check_options("exp+llm", PolicyConfig(selection="official_code"))

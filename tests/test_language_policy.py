@@ -5,7 +5,8 @@ import pytest
 
 from l3mvn.errors import L3MVNError
 from l3mvn.frontiers import Frontier
-from l3mvn.policies import POLICY_NAMES, PolicyOptions
+from l3mvn.config import PolicyConfig
+from l3mvn.registry import POLICY_NAMES
 from l3mvn.policies.language_policy import LanguageFrontierPolicy
 
 
@@ -57,4 +58,4 @@ def test_table_ii_ablations_are_named_policies():
 
 def test_unknown_selection_is_a_clear_error():
     with pytest.raises(L3MVNError, match="unknown selection 'best'.*paper, official_code"):
-        PolicyOptions(selection="best")
+        PolicyConfig(selection="best")

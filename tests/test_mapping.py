@@ -8,20 +8,21 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from l3mvn.config import SimConfig
 from l3mvn.errors import L3MVNError
-from l3mvn.mapping import CameraIntrinsics, MapConfig, SemanticMapper, depth_to_points, downsample_frame
-from l3mvn.sim.types import Pose
+from l3mvn.config import MapConfig, SimConfig
+from l3mvn.mapping import CameraIntrinsics, SemanticMapper, depth_to_points, downsample_frame
+from l3mvn.types import Pose
 
 H, W = 120, 160
-INTR = CameraIntrinsics.from_sim(SimConfig(), H, W)  # 79 deg HFOV, camera 0.88 m up
+SIM = SimConfig()
+INTR = CameraIntrinsics.from_sim(SIM, H, W)  # 79 deg HFOV, camera 0.88 m up
 CATS = ("chair", "couch", "tv")
 CENTRE = 480  # 48 m map at 5 cm
 START = Pose(3.3, -1.2, 0.0)
 
 
 def _mapper(cfg: MapConfig | None = None, start: Pose = START) -> SemanticMapper:
-    mapper = SemanticMapper(cfg or MapConfig(), INTR, CATS)
+    mapper = SemanticMapper(cfg or MapConfig(), INTR, CATS, max_depth_m=SIM.max_depth_m, body_radius_m=SIM.agent_radius_m)
     mapper.reset(start)
     return mapper
 
@@ -254,7 +255,7 @@ def test_map_sizes_follow_the_config():
 # --- bad inputs -------------------------------------------------------------------------------
 def test_update_before_reset_raises():
     with pytest.raises(L3MVNError, match="reset"):
-        SemanticMapper(MapConfig(), INTR, CATS).update(_wall(2.0), None, START, 0.0)
+        SemanticMapper(MapConfig(), INTR, CATS, max_depth_m=SIM.max_depth_m, body_radius_m=SIM.agent_radius_m).update(_wall(2.0), None, START, 0.0)
 
 
 def test_depth_of_the_wrong_shape_raises():

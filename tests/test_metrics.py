@@ -3,9 +3,10 @@ import math
 import numpy as np
 import pytest
 
-from l3mvn.config import SimConfig
-from l3mvn.eval.geodesic import geodesic_field, goal_region
-from l3mvn.eval.metrics import EpisodeOutcome, format_summary, score_episode, summarize
+from l3mvn.config import Config, TaskConfig
+from l3mvn.task.regions import geodesic_field, goal_region
+from l3mvn.eval.metrics import format_summary, summarize
+from l3mvn.task.scoring import EpisodeOutcome, score_episode
 
 
 def _outcome(**kw):
@@ -16,12 +17,12 @@ def _outcome(**kw):
 
 
 def test_spl_is_shortest_over_walked_when_walked_longer():
-    s, spl, dtg, cause = score_episode(_outcome())
+    s, spl, dtg, cause = score_episode(_outcome(), TaskConfig())
     assert (s, cause, dtg) == (1.0, "success", 0.0) and math.isclose(spl, 5.0 / 6.0)
 
 
 def test_spl_caps_at_one_when_walked_less_than_shortest():
-    assert score_episode(_outcome(path_length_m=4.0))[1] == 1.0
+    assert score_episode(_outcome(path_length_m=4.0), TaskConfig())[1] == 1.0
 
 
 @pytest.mark.parametrize("kw,cause", [
@@ -36,7 +37,7 @@ def test_spl_caps_at_one_when_walked_less_than_shortest():
     (dict(stopped=False, in_success_region=False, recent_collision_rate=0.8), "stuck"),
 ])
 def test_each_failure_cause_is_distinguished(kw, cause):
-    s, spl, _, c = score_episode(_outcome(**kw))
+    s, spl, _, c = score_episode(_outcome(**kw), TaskConfig())
     assert (s, spl, c) == (0.0, 0.0, cause)
 
 
@@ -73,7 +74,7 @@ def test_geodesic_field_goes_around_a_wall():
 
 
 def test_semexp_region_is_a_one_metre_disk_around_the_goal_and_adds_one_metre(tiny_scene):
-    g = goal_region(tiny_scene, "toilet", SimConfig())
+    g = goal_region(tiny_scene, "toilet", Config())
     toilet = tiny_scene.category_mask("toilet")
     rows, cols = np.nonzero(g.region)
     tr, tc = np.nonzero(toilet)
@@ -84,7 +85,7 @@ def test_semexp_region_is_a_one_metre_disk_around_the_goal_and_adds_one_metre(ti
 
 
 def test_geodesic_rule_region_is_inside_the_semexp_region(tiny_scene):
-    semexp = goal_region(tiny_scene, "toilet", SimConfig())
-    strict = goal_region(tiny_scene, "toilet", SimConfig(success_rule="geodesic"))
+    semexp = goal_region(tiny_scene, "toilet", Config())
+    strict = goal_region(tiny_scene, "toilet", Config(task=TaskConfig(success_rule="geodesic")))
     assert strict.region.sum() > 0 and not (strict.region & ~semexp.region).any()
     assert strict.length_offset_m == 0.0

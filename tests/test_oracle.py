@@ -4,10 +4,11 @@ import json
 import math
 
 from l3mvn.cli import main
-from l3mvn.config import SimConfig
+from l3mvn.config import Config, SimConfig
 from l3mvn.policies.oracle import OraclePolicy
 from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.sim.types import Action, Episode, Pose
+from l3mvn.types import Action, Episode, Pose
+from l3mvn.task import ObjectNavTask
 
 
 def _episode(scene, goal="toilet") -> Episode:
@@ -18,7 +19,7 @@ def _episode(scene, goal="toilet") -> Episode:
 
 def test_when_no_forward_move_helps_the_oracle_turns_towards_the_path(tiny_scene, monkeypatch):
     env = BuiltinSimulator(tiny_scene, SimConfig())
-    oracle = OraclePolicy(env)
+    oracle = OraclePolicy(env, ObjectNavTask(tiny_scene, Config(sim=env.cfg)))
     episode = _episode(tiny_scene)
     obs = env.reset(episode)
     oracle.reset(episode)

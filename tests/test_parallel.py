@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from conftest import draw_two_room_house
-from l3mvn.config import SimConfig
+from l3mvn.config import Config
 from l3mvn.episodes import episode_file, generate_episodes, write_episode_file
 from l3mvn.eval.backends import run_local
 from l3mvn.eval.job import EvalJob, is_error_row
@@ -30,7 +30,7 @@ def metrics_by_key(rows: list[dict]) -> dict[str, tuple]:
 
 
 def small_job(dataset: Path, policy: str) -> EvalJob:
-    return EvalJob.create(dataset, "val", sim=SimConfig().with_frame(60, 80), policy=policy)
+    return EvalJob.create(dataset, "val", config=Config().with_frame(60, 80), policy=policy)
 
 
 def write_dataset(root: Path, per_house: int) -> Path:
@@ -63,7 +63,7 @@ def test_two_workers_give_every_episode_the_same_metrics_as_one(tiny_dataset, po
     assert not any(is_error_row(r) for r in one + two)
     assert metrics_by_key(two) == metrics_by_key(one)
     assert len({r["worker"] for r in two}) == 2
-    assert all(r["config_hash"] == job.config_hash and r["config"]["SimConfig"]["frame_width"] == 80 for r in two)
+    assert all(r["config_hash"] == job.config_hash and r["config"]["sim"]["frame_width"] == 80 for r in two)
 
 
 def test_an_episode_that_raises_becomes_an_error_row_and_the_others_finish(tiny_dataset):
@@ -78,7 +78,7 @@ def test_an_episode_that_raises_becomes_an_error_row_and_the_others_finish(tiny_
 
 
 def test_a_worker_killed_mid_run_costs_a_retry_not_an_episode(tiny_dataset):
-    job = EvalJob.create(tiny_dataset, "val", sim=SimConfig().with_frame(240, 320), policy="oracle")
+    job = EvalJob.create(tiny_dataset, "val", config=Config().with_frame(240, 320), policy="oracle")
     rows = []
     for row in run_local(job, job.keys(), workers=2):
         if not rows:

@@ -9,10 +9,16 @@ import pytest
 from scipy import ndimage
 
 from l3mvn.errors import L3MVNError
-from l3mvn.planning import LocalPlanner, PlannerConfig, Window, distance_field
-from l3mvn.sim.types import Action
+from l3mvn.config import PlannerConfig
+from l3mvn.planning import LocalPlanner, Window, distance_field
+from l3mvn.types import Action
 
 RES = 0.05
+
+
+def _planner() -> LocalPlanner:
+    """SemExp's planner: obstacles grown by disk(3), on 5 cm cells."""
+    return LocalPlanner(PlannerConfig(obstacle_dilation_cells=3), RES)
 
 
 def _room(size: int = 120) -> np.ndarray:
@@ -31,11 +37,11 @@ def _reference_field(planner: LocalPlanner, obstacle: np.ndarray, goal: tuple[in
     trav = ~ndimage.binary_dilation(obstacle, disk)
     if planner.collision_map is not None:
         trav &= ~planner.collision_map
-    g = cfg.goal_dilation_cells
+    g = planner.goal_dilation_cells
     goal_mask = np.zeros_like(obstacle)
     goal_mask[goal] = True
     sources = ndimage.binary_dilation(goal_mask, np.hypot(*np.mgrid[-g : g + 1, -g : g + 1]) <= g)
-    return distance_field(trav, sources, resolution_m=cfg.resolution_m)
+    return distance_field(trav, sources, resolution_m=planner.resolution_m)
 
 
 def test_fmm_distance_through_a_door_equals_the_detour_length():
@@ -67,7 +73,7 @@ def test_fmm_rejects_sources_outside_the_array():
 def test_planned_distance_around_a_wall_matches_the_whole_map_field():
     obstacle = _room(200)
     obstacle[100, 20:180] = True
-    planner = LocalPlanner()
+    planner = _planner()
     plan = planner.plan(obstacle, (50, 100), 0.0, (150, 100))
     reference = _reference_field(planner, obstacle, (150, 100))
     assert plan.reachable
@@ -81,7 +87,7 @@ def test_windowed_field_equals_the_whole_map_field_on_random_maps(seed):
     obstacle |= ndimage.binary_dilation(rng.random((160, 160)) < 0.004, iterations=3)
     free = np.argwhere(~ndimage.binary_dilation(obstacle, iterations=6))
     agent, goal = (tuple(int(v) for v in free[i]) for i in rng.choice(len(free), 2, replace=False))
-    planner = LocalPlanner()
+    planner = _planner()
     plan = planner.plan(obstacle, agent, 0.0, goal)
     reference = _reference_field(planner, obstacle, goal)
     window = plan.field.window
@@ -107,7 +113,7 @@ def test_distance_from_agent_equals_the_whole_map_field_within_its_limit(seed):
     obstacle |= ndimage.binary_dilation(rng.random((160, 160)) < 0.004, iterations=3)
     free = np.argwhere(~ndimage.binary_dilation(obstacle, iterations=6))
     agent = tuple(int(v) for v in free[rng.integers(len(free))])
-    planner = LocalPlanner()
+    planner = _planner()
     near = planner.distance_from_agent(obstacle, agent, max_distance_m=2.0)
     everywhere = planner.distance_from_agent(obstacle, agent)
     full = everywhere.full()
@@ -123,7 +129,7 @@ def test_distance_from_agent_covers_the_targets_beyond_the_obstacles():
     obstacle[100:110, 100:110] = True
     explored = np.zeros_like(obstacle)
     explored[90:250, 90:120] = True  # explored open floor reaching far below the only obstacle
-    planner = LocalPlanner()
+    planner = _planner()
     field = planner.distance_from_agent(obstacle, (95, 95), targets=explored)
     assert field.at(240, 110) == pytest.approx(math.hypot(145, 15) * RES, rel=0.02)
     assert field.at(299, 299) == np.inf  # outside the window: not computed
@@ -134,7 +140,7 @@ def test_reused_field_gives_the_agent_the_same_distance_as_a_fresh_plan(seed):
     rng = np.random.default_rng(100 + seed)
     obstacle = _room(200)
     agent, goal = (20, 20), (180, 170)
-    cached = LocalPlanner()
+    cached = _planner()
     reused = 0
     for _ in range(40):
         # New obstacles appear, some near the agent's path, most far from it.
@@ -142,7 +148,7 @@ def test_reused_field_gives_the_agent_the_same_distance_as_a_fresh_plan(seed):
         obstacle[max(r - 2, 1) : r + 3, max(c - 2, 1) : c + 3] = True
         obstacle[agent[0] - 4 : agent[0] + 5, agent[1] - 4 : agent[1] + 5] = False
         plan = cached.plan(obstacle, agent, 0.0, goal)
-        fresh = LocalPlanner().plan(obstacle, agent, 0.0, goal)
+        fresh = _planner().plan(obstacle, agent, 0.0, goal)
         reused += not plan.replanned
         assert plan.distance_to_goal_m == pytest.approx(fresh.distance_to_goal_m, abs=2 * RES)
         step = np.subtract(plan.short_term_goal, agent)
@@ -154,7 +160,7 @@ def test_short_term_goal_stays_on_the_free_side_of_a_wall():
     obstacle = _room(160)
     obstacle[80, :] = True
     obstacle[80, 130:140] = False  # a door far to the right
-    planner = LocalPlanner()
+    planner = _planner()
     plan = planner.plan(obstacle, (72, 40), 0.0, (90, 40))
     assert plan.reachable
     assert plan.short_term_goal[0] < 80 - planner.cfg.obstacle_dilation_cells
@@ -176,26 +182,26 @@ def test_short_term_goal_stays_on_the_free_side_of_a_wall():
     ],
 )
 def test_action_turns_toward_the_goal_and_goes_forward_when_aligned(heading_deg, goal, expected):
-    plan = LocalPlanner().plan(_room(), (60, 60), math.radians(heading_deg), goal)
+    plan = _planner().plan(_room(), (60, 60), math.radians(heading_deg), goal)
     assert plan.action == expected
 
 
 @pytest.mark.parametrize("goal", [(60, 67), (60, 71), (50, 60)])
 def test_short_term_goal_inside_the_dilated_goal_heads_for_the_goal_itself(goal):
-    plan = LocalPlanner().plan(_room(), (60, 60), 0.0, goal)
+    plan = _planner().plan(_room(), (60, 60), 0.0, goal)
     before = math.dist((60, 60), goal)
     assert math.dist(plan.short_term_goal, goal) < before - 1
 
 
 def test_planner_never_stops_even_on_the_goal():
-    plan = LocalPlanner().plan(_room(), (60, 60), 0.0, (60, 60), goal_reached_radius_m=0.5)
+    plan = _planner().plan(_room(), (60, 60), 0.0, (60, 60), goal_reached_radius_m=0.5)
     assert plan.reached
     assert plan.action != Action.STOP
 
 
 def test_failed_forward_step_blocks_cells_ahead_and_the_next_plan_goes_around():
     obstacle = _room()
-    planner = LocalPlanner()
+    planner = _planner()
     first = planner.plan(obstacle, (60, 30), 0.0, (60, 100))
     assert first.action == Action.MOVE_FORWARD and not first.collided
     second = planner.plan(obstacle, (60, 30), 0.0, (60, 100), last_move_m=0.02)
@@ -208,7 +214,7 @@ def test_failed_forward_step_blocks_cells_ahead_and_the_next_plan_goes_around():
 
 
 def test_forward_step_that_moved_enough_is_not_a_collision():
-    planner = LocalPlanner()
+    planner = _planner()
     plan = planner.plan(_room(), (60, 30), 0.0, (60, 100), last_move_m=0.12)
     assert not plan.collided
     assert not planner.collision_map.any()
@@ -216,7 +222,7 @@ def test_forward_step_that_moved_enough_is_not_a_collision():
 
 def test_repeated_collisions_raise_stuck():
     cfg = PlannerConfig(stuck_collisions=5, stuck_window_steps=50)
-    planner = LocalPlanner(cfg)
+    planner = LocalPlanner(cfg, RES)
     flags = [
         planner.plan(_room(), (60, 30), 0.0, (60, 100), last_move_m=0.0).stuck for _ in range(5)
     ]
@@ -225,7 +231,7 @@ def test_repeated_collisions_raise_stuck():
 
 def test_no_progress_over_the_window_raises_stuck():
     cfg = PlannerConfig(stuck_window_steps=10, stuck_collisions=10, stuck_min_displacement_m=0.5)
-    planner = LocalPlanner(cfg)
+    planner = LocalPlanner(cfg, RES)
     flags = [planner.plan(_room(), (60, 30 + i % 2), 0.0, (60, 100)).stuck for i in range(10)]
     assert flags == [False] * 9 + [True]
     planner.reset()
@@ -238,7 +244,7 @@ def test_unreachable_goal_is_reported_and_the_agent_heads_to_the_nearest_reachab
     obstacle[40:81, 110] = True
     obstacle[40, 80:111] = True
     obstacle[80, 80:111] = True  # a closed box around the goal
-    planner = LocalPlanner()
+    planner = _planner()
     plan = planner.plan(obstacle, (60, 30), 0.0, (60, 95))
     assert not plan.reachable and not plan.reached
     assert plan.distance_to_goal_m == math.inf
@@ -249,7 +255,7 @@ def test_unreachable_goal_is_reported_and_the_agent_heads_to_the_nearest_reachab
 def test_agent_inside_dilated_obstacles_can_still_move_out():
     obstacle = _room()
     obstacle[:, 58] = True  # a wall 2 cells to the agent's right (-col side)
-    planner = LocalPlanner()
+    planner = _planner()
     plan = planner.plan(obstacle, (60, 60), math.pi / 2, (60, 100))
     assert plan.reachable
     assert plan.short_term_goal[1] > 60
@@ -257,7 +263,7 @@ def test_agent_inside_dilated_obstacles_can_still_move_out():
 
 
 def test_reached_is_true_only_within_the_radius():
-    planner = LocalPlanner()
+    planner = _planner()
     assert planner.plan(_room(), (60, 60), 0.0, (60, 66), goal_reached_radius_m=0.5).reached
     assert not planner.plan(_room(), (60, 60), 0.0, (60, 76), goal_reached_radius_m=0.5).reached
     assert planner.plan(_room(), (60, 60), 0.0, (60, 76), goal_reached_radius_m=1.0).reached
@@ -266,7 +272,7 @@ def test_reached_is_true_only_within_the_radius():
 def test_small_goal_dilation_keeps_a_goal_behind_a_thin_wall_from_reading_as_reached():
     obstacle = _room()
     obstacle[:100, 64] = True  # a one-cell wall, its door at the far end
-    planner = LocalPlanner(PlannerConfig(obstacle_dilation_cells=1))
+    planner = LocalPlanner(PlannerConfig(obstacle_dilation_cells=1), RES)
     through_wall = planner.plan(obstacle, (40, 58), 0.0, (40, 70), goal_reached_radius_m=0.75)
     assert through_wall.reached  # the 0.5 m object disk reaches across the wall
     planner.reset()
@@ -278,7 +284,7 @@ def test_small_goal_dilation_keeps_a_goal_behind_a_thin_wall_from_reading_as_rea
 
 
 def test_bad_inputs_raise_clear_errors():
-    planner = LocalPlanner()
+    planner = _planner()
     with pytest.raises(L3MVNError, match="bool"):
         planner.plan(_room().astype(np.uint8), (60, 60), 0.0, (60, 70))
     with pytest.raises(L3MVNError, match="outside"):
@@ -295,7 +301,7 @@ def _drive(obstacle: np.ndarray, start: tuple[float, float, float], goal: tuple[
     """A 2D kinematic agent (0.25 m steps, 30 deg turns, 0.18 m disk) driven by the planner."""
     clearance = ndimage.distance_transform_edt(~obstacle) * RES
     x, y, heading = start
-    planner = LocalPlanner()
+    planner = _planner()
     last_move = None
     for step in range(steps):
         cell = (int(y / RES), int(x / RES))
@@ -336,7 +342,7 @@ def test_closed_loop_agent_gets_around_an_obstacle_missing_from_its_map():
     true_map[50:70, 60:63] = True  # the planner never sees this wall
     clearance = ndimage.distance_transform_edt(~true_map) * RES
     x, y, heading = 1.5, 3.0, 0.0
-    planner = LocalPlanner()
+    planner = _planner()
     last_move = None
     for _ in range(150):
         cell = (int(y / RES), int(x / RES))

@@ -13,18 +13,16 @@ import pytest
 import rerun as rr
 from rerun.chunk import RrdReader
 
-from l3mvn.config import SimConfig
+from l3mvn.config import AgentConfig, Config, SimConfig
 from l3mvn.episodes import generate_episodes
 from l3mvn.errors import L3MVNError
 from l3mvn.events import EventBus
-from l3mvn.policies import make_policy
 from l3mvn.recording import (
     Recorder, add_replay_arguments, list_recordings, open_recording, parse_recording_name, read_recording,
     recording_path, run_replay,
 )
-from l3mvn.session import EpisodeSession
-from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.sim.types import Action
+from l3mvn.runner import Runner
+from l3mvn.types import Action
 
 MAX_STEPS = 15
 CAMERA = {"/camera", "/camera/rgb", "/camera/depth", "/camera/semantic"}
@@ -43,24 +41,23 @@ def strict_rerun():
     rr.set_strict_mode(before)
 
 
+CONFIG = Config(sim=dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=MAX_STEPS))
+
+
 @pytest.fixture
-def env(tiny_scene):
-    cfg = dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=MAX_STEPS)
-    return BuiltinSimulator(tiny_scene, cfg)
+def runner():
+    return Runner(CONFIG, config_hash="test")
 
 
-def _episode(env, goal="toilet"):
-    return generate_episodes(env.scene, 1, seed=3, goals=(goal,))[0]
+def _episode(scene, goal="toilet"):
+    return generate_episodes(scene, 1, seed=3, goals=(goal,))[0]
 
 
-def _record(env, policy_name, tmp_path, policy=None):
-    episode = _episode(env)
+def _record(runner, scene, policy_name, tmp_path):
+    episode = _episode(scene)
     bus = EventBus()
     recorder = Recorder.for_episode(tmp_path, "tiny_ds", episode, policy_name).attach(bus)
-    session = EpisodeSession(env, policy or make_policy(policy_name, env), policy_name=policy_name,
-                             config_hash="test", bus=bus)
-    session.start(episode)
-    result = session.run()
+    result = runner.run(scene, episode, policy_name, bus)
     return recorder, result, bus
 
 
@@ -73,8 +70,8 @@ def _values(path, entity, column):
     return out
 
 
-def test_oracle_episode_records_camera_world_metrics_and_one_row_per_step_without_map(env, tmp_path):
-    recorder, result, bus = _record(env, "oracle", tmp_path)
+def test_oracle_episode_records_camera_world_metrics_and_one_row_per_step_without_map(runner, tiny_scene, tmp_path):
+    recorder, result, bus = _record(runner, tiny_scene, "oracle", tmp_path)
 
     assert recorder.closed and recorder.errors == 0 and len(bus) == 0  # closed on done, unsubscribed
     summary = read_recording(recorder.path)
@@ -88,11 +85,9 @@ def test_oracle_episode_records_camera_world_metrics_and_one_row_per_step_withou
     assert all(d.split()[0] in {a.name.lower() for a in Action} for d in decisions)
 
 
-def test_map_agent_episode_records_map_frontiers_goal_and_trajectory(env, tmp_path):
-    from l3mvn.agent import AgentConfig
-
-    policy = make_policy("frontier", env, agent_cfg=AgentConfig(look_around_steps=2))
-    recorder, result, _ = _record(env, "frontier", tmp_path, policy)
+def test_map_agent_episode_records_map_frontiers_goal_and_trajectory(tiny_scene, tmp_path):
+    runner = Runner(CONFIG.replace(agent=AgentConfig(look_around_steps=2)))
+    recorder, result, _ = _record(runner, tiny_scene, "frontier", tmp_path)
 
     assert recorder.errors == 0
     summary = read_recording(recorder.path)
@@ -105,14 +100,13 @@ def test_map_agent_episode_records_map_frontiers_goal_and_trajectory(env, tmp_pa
     assert any(label.startswith("*") for label in labels)  # the chosen frontier is marked
 
 
-def test_two_recordings_written_concurrently_stay_separate(env, tiny_scene, tmp_path):
-    other_env = BuiltinSimulator(tiny_scene, env.cfg)
-    episodes = [_episode(env, "toilet"), _episode(other_env, "bed")]
+def test_two_recordings_written_concurrently_stay_separate(tiny_scene, tmp_path):
+    episodes = [_episode(tiny_scene, "toilet"), _episode(tiny_scene, "bed")]
     sessions, recorders = [], []
-    for e, ep, name in zip((env, other_env), episodes, ("random-walk", "oracle")):
+    for ep, name in zip(episodes, ("random-walk", "oracle")):
         bus = EventBus()
         recorders.append(Recorder.for_episode(tmp_path, "tiny", ep, name).attach(bus))
-        sessions.append(EpisodeSession(e, make_policy(name, e), policy_name=name, config_hash="t", bus=bus))
+        sessions.append(Runner(CONFIG).session(tiny_scene, name, bus))  # a runner each: two simulators
         sessions[-1].start(ep)
     while not all(s.done for s in sessions):  # interleave the two loops step by step
         for s in sessions:
@@ -126,13 +120,11 @@ def test_two_recordings_written_concurrently_stay_separate(env, tiny_scene, tmp_
     assert read_recording(recorders[0].path).recording_id != read_recording(recorders[1].path).recording_id
 
 
-def test_a_failing_event_is_counted_not_raised_and_the_file_still_closes(env, tmp_path):
-    episode = _episode(env)
+def test_a_failing_event_is_counted_not_raised_and_the_file_still_closes(runner, tiny_scene, tmp_path):
+    episode = _episode(tiny_scene)
     bus = EventBus()
     recorder = Recorder.for_episode(tmp_path, "tiny", episode, "random-walk").attach(bus)
-    session = EpisodeSession(env, make_policy("random-walk", env), policy_name="random-walk", config_hash="t",
-                             bus=bus)
-    first = session.start(episode)
+    first = runner.session(tiny_scene, "random-walk", bus).start(episode)
     broken = dataclasses.replace(first, step=1, observation=dataclasses.replace(
         first.observation, rgb=np.zeros((2, 3, 4, 5), np.uint8)))
     recorder(broken)  # called directly: the bus would swallow an exception, the recorder must not raise one
@@ -192,8 +184,8 @@ def test_replay_rejects_a_missing_recording_naming_the_file(tmp_path):
         run_replay(_replay_args(str(tmp_path / "nothere.rrd")))
 
 
-def test_a_recording_cut_off_mid_write_is_reported_as_unreadable(env, tmp_path):
-    recorder, _, _ = _record(env, "random-walk", tmp_path)
+def test_a_recording_cut_off_mid_write_is_reported_as_unreadable(runner, tiny_scene, tmp_path):
+    recorder, _, _ = _record(runner, tiny_scene, "random-walk", tmp_path)
     data = recorder.path.read_bytes()
     cut = tmp_path / "cut.rrd"
     cut.write_bytes(data[: len(data) // 2])

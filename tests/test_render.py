@@ -11,7 +11,7 @@ import pytest
 from l3mvn.config import SimConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.sim.render import Renderer
-from l3mvn.sim.types import Pose
+from l3mvn.types import Pose
 from l3mvn.sim.world import build_world
 from l3mvn.viz import category_palette, colorize_depth, colorize_semantic, legend, side_by_side
 

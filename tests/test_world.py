@@ -168,7 +168,7 @@ def _area(tris: np.ndarray) -> float:
 def test_every_gibson_floor_builds_compactly_and_no_walkable_camera_is_inside_a_wall():
     from l3mvn.scenes.semexp import load_split
     from l3mvn.sim.render import Renderer
-    from l3mvn.sim.types import Pose
+    from l3mvn.types import Pose
 
     cfg = SimConfig(min_depth_m=1e-3)
     rng = np.random.default_rng(0)
@@ -213,7 +213,7 @@ def test_no_goal_object_of_the_gibson_houses_is_walled_in():
 def _pixels(scene: SceneMap, category: str, row: int, col: int, heading: float) -> int:
     """Pixels of ``category`` seen from the cell (row, col) at camera height, tilt 0, 120x160."""
     from l3mvn.sim.render import Renderer
-    from l3mvn.sim.types import Pose
+    from l3mvn.types import Pose
 
     assert scene.walkable[row, col], "the viewpoint must be a standing pose"
     x, y = scene.cell_center(row, col)

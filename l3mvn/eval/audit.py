@@ -8,7 +8,7 @@ they are measured here, per goal instance, with the agent's own pieces: the rend
 
 For each instance (8-connected component of a goal category's footprint) the audit stands the agent
 on a bounded, deterministic sample of walkable cells in the instance's success region (the rule of
-``SimConfig.success_rule``), looks around (``AuditConfig.headings`` x ``tilts_deg``), maps those
+``TaskConfig.success_rule``), looks around (``AuditConfig.headings`` x ``tilts_deg``), maps those
 views into a fresh map and asks the agent's rule whether the mapped cells on or near this instance
 confirm it. Poses are tried nearest first and the first confirming one ends the search; failing
 that, reachable poses outside the region (up to ``search_radius_m``) give the nearest distance from
@@ -31,16 +31,16 @@ import cv2
 import numpy as np
 from scipy import ndimage as ndi
 
-from l3mvn.agent import AgentConfig, MapAgent
-from l3mvn.config import SimConfig
+from l3mvn.agent import MapAgent
+from l3mvn.config import Config
 from l3mvn.errors import L3MVNError
-from l3mvn.eval.geodesic import footprint_region
+from l3mvn.task.regions import footprint_region
 from l3mvn.mapping import CameraIntrinsics, SemanticMapper
 from l3mvn.mapping.projection import depth_to_points, downsample_frame
 from l3mvn.scenes.scene import GOAL_CATEGORIES, SceneMap
 from l3mvn.sim.render import Renderer
 from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.sim.types import Episode, Pose
+from l3mvn.types import Episode, Pose
 from l3mvn.sim.world import World
 from l3mvn.viz import category_color
 
@@ -194,21 +194,21 @@ class _Look:
 class FloorAuditor:
     """Audits the goal instances of one floor; renderer, mapper and agent rule built once and reused."""
 
-    def __init__(self, scene: SceneMap, cfg: SimConfig | None = None, audit: AuditConfig | None = None,
-                 agent: AgentConfig | None = None, world: World | None = None) -> None:
+    def __init__(self, scene: SceneMap, cfg: Config | None = None, audit: AuditConfig | None = None,
+                 world: World | None = None) -> None:
         """``world``: audit this mesh instead of the one the built-in simulator builds from ``scene``."""
         self.scene = scene
-        self.cfg = cfg or SimConfig()
+        self.config = cfg or Config()
+        self.cfg = self.config.sim
         self.audit = audit or AuditConfig()
-        self.agent_cfg = agent or AgentConfig()
         self.renderer = BuiltinSimulator(scene, self.cfg).renderer if world is None else Renderer(world, self.cfg)
         h, w = self.cfg.frame_height, self.cfg.frame_width
         # Exactly MapAgent._update_map's mapper: same config, intrinsics of the downsampled frame.
-        self.factor = self.agent_cfg.downsample_factor(h, w)
+        self.factor = self.config.agent.downsample_factor(h, w)
         self.full_intr = CameraIntrinsics.from_sim(self.cfg, h, w)
-        self.mapper = SemanticMapper(self.agent_cfg.map, CameraIntrinsics.from_sim(
-            self.cfg, h // self.factor, w // self.factor), scene.categories)
-        self.judge = MapAgent(None, scene.categories, self.cfg, self.agent_cfg)  # type: ignore[arg-type]
+        self.mapper = SemanticMapper.for_sim(self.config.map, self.cfg, h // self.factor, w // self.factor,
+                                             scene.categories)
+        self.judge = MapAgent(None, scene.categories, self.config)  # type: ignore[arg-type]
         self.judge.reset(Episode(0, scene.name, scene.floor, Pose(0.0, 0.0, 0.0), scene.categories[0]))
         self.walk_labels, _ = ndi.label(scene.walkable, structure=_EIGHT)
         self._mesh_cells = self._mesh_object_cells()
@@ -259,7 +259,7 @@ class FloorAuditor:
         d_fp = ndi.distance_transform_edt(~footprint) * res
         walk = scene.walkable
         gap = float(d_fp[walk].min()) if walk.any() else None
-        region = footprint_region(scene, footprint, self.cfg, f"{category}#{instance_id}").region
+        region = footprint_region(scene, footprint, self.config, f"{category}#{instance_id}").region
         region_walk = region & walk
         region_reach = region_walk & reachable
         near = ndi.binary_dilation(footprint, _EIGHT, iterations=audit.near_cells) if audit.near_cells else footprint
@@ -308,7 +308,7 @@ class FloorAuditor:
             in_mesh = bool((ids == target.cat_id)[ndi.binary_dilation(footprint, _EIGHT)[mr, mc]].any())
             if not in_mesh:
                 reason = "erased"
-            elif gap is None or gap > self.cfg.success_distance_m:
+            elif gap is None or gap > self.config.task.success_distance_m:
                 reason = "no_floor"
             elif not region_walk.any():
                 reason = "no_region"
@@ -455,7 +455,7 @@ def _better(best: _Look, look: _Look) -> _Look:
     return best
 
 
-def audit_floor(scene: SceneMap, cfg: SimConfig | None = None, episodes: list[Episode] | None = None,
+def audit_floor(scene: SceneMap, cfg: Config | None = None, episodes: list[Episode] | None = None,
                 audit: AuditConfig | None = None, out_dir: str | Path | None = None,
                 all_pngs: bool = False) -> FloorAudit:
     """Audit every goal instance of one floor (and the episodes given for it)."""
@@ -465,15 +465,15 @@ def audit_floor(scene: SceneMap, cfg: SimConfig | None = None, episodes: list[Ep
 
 # --- a split -----------------------------------------------------------------------------------
 
-def audit_scenes(scenes: dict[str, dict[int, SceneMap]], cfg: SimConfig | None = None,
+def audit_scenes(scenes: dict[str, dict[int, SceneMap]], cfg: Config | None = None,
                  episodes: list[Episode] | None = None, audit: AuditConfig | None = None, workers: int = 2,
                  out_dir: str | Path | None = None, all_pngs: bool = False, source: str = "", split: str = "",
                  progress: Callable[[FloorAudit], None] | None = None) -> AuditReport:
     """Audit every floor of ``scenes``, ``workers`` floors at a time (largest first), in name order."""
-    cfg = cfg or SimConfig()
+    cfg = cfg or Config()
     if workers < 1:
         raise L3MVNError(f"workers must be >= 1, got {workers}")
-    AgentConfig().downsample_factor(cfg.frame_height, cfg.frame_width)
+    cfg.agent.downsample_factor(cfg.sim.frame_height, cfg.sim.frame_width)
     t0 = time.perf_counter()
     floors = sorted((s for fl in scenes.values() for s in fl.values()), key=lambda s: -s.navigable.size)
     jobs = [(s, cfg, [e for e in episodes or () if (e.scene, e.floor) == (s.name, s.floor)], audit,
@@ -503,7 +503,7 @@ def audit_scenes(scenes: dict[str, dict[int, SceneMap]], cfg: SimConfig | None =
                 if progress:
                     progress(done[-1])
     done.sort(key=lambda f: (f.scene, f.floor))
-    return AuditReport(source, split, cfg.success_rule, (cfg.frame_height, cfg.frame_width),
+    return AuditReport(source, split, cfg.task.success_rule, (cfg.sim.frame_height, cfg.sim.frame_width),
                        time.perf_counter() - t0, done)
 
 
@@ -531,7 +531,7 @@ def load_split_for_audit(dataset: str | Path, split: str, scene: str | None = No
     return scenes, episodes
 
 
-def audit_split(dataset: str | Path, split: str, cfg: SimConfig | None = None, scene: str | None = None,
+def audit_split(dataset: str | Path, split: str, cfg: Config | None = None, scene: str | None = None,
                 audit: AuditConfig | None = None, workers: int = 2, out_dir: str | Path | None = None,
                 all_pngs: bool = False, progress: Callable[[FloorAudit], None] | None = None) -> AuditReport:
     """``audit_scenes`` on a SemExp split and its episodes (``load_split_for_audit``)."""

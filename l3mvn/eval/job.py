@@ -1,9 +1,9 @@
 """An evaluation run as a small picklable value that any worker process (local or Ray) can execute.
 
 Workers receive the job once and episode keys one at a time; each process loads the episode set once
-and keeps a few environments (one per scene floor) warm, because building a floor's world costs
-~0.1-1 s while an episode costs seconds. Policies are reset per episode and seed themselves from the
-episode, so a key gives the same metrics whichever process runs it and in whatever order.
+and runs episodes through a ``Runner`` that keeps a few floors warm. Policies are reset per episode
+and seed themselves from the episode, so a key gives the same metrics whichever process runs it and
+in whatever order.
 """
 
 from __future__ import annotations
@@ -14,23 +14,16 @@ import socket
 import sys
 import time
 import traceback
-from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from l3mvn.config import SimConfig, config_dict, config_hash
+from l3mvn.config import Config, config_dict, config_hash
 from l3mvn.datasets import EpisodeSet, load_episode_set
 from l3mvn.errors import L3MVNError
-from l3mvn.eval.runner import RunContext, run_episode
 from l3mvn.events import EventBus, StepEvent
-from l3mvn.policies import PolicyOptions, check_policy, make_policy
+from l3mvn.registry import check_options, check_policy
 from l3mvn.recording import Recorder
-from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.sim.types import Episode
-
-# Environments kept per process: workers pull episodes in dataset order, so a handful of floors
-# covers what neighbouring workers are on without holding a whole split's worlds in memory.
-ENV_CACHE_SIZE = 4
+from l3mvn.runner import Runner
 
 
 @dataclass(frozen=True)
@@ -42,25 +35,24 @@ class EvalJob:
     houses: int
     episodes_per_house: int
     seed: int
-    sim: SimConfig
+    config: Config
     policy: str
     config_hash: str
-    options: PolicyOptions = PolicyOptions()
     record_dir: str | None = None  # write a rerun recording per episode here
 
     @classmethod
     def create(cls, dataset: str | Path | None, split: str, *, houses: int = 5, episodes_per_house: int = 10,
-               seed: int = 0, sim: SimConfig | None = None, policy: str, options: PolicyOptions | None = None,
+               seed: int = 0, config: Config | None = None, policy: str,
                record_dir: str | Path | None = None) -> "EvalJob":
-        """A job whose config hash covers SimConfig, policy, policy options and seed (recording
+        """A job whose config hash covers the whole config tree, the policy and the seed (recording
         changes no result, so it is not hashed)."""
-        sim = sim or SimConfig()
-        options = options or PolicyOptions()
-        chash = config_hash(sim, options, extra={"policy": policy, "seed": seed})
+        config = config or Config()
+        check_options(check_policy(policy), config.policy)
+        chash = config_hash(config, extra={"policy": policy, "seed": seed})
         # Absolute paths, so workers started elsewhere (Ray) find the same files on a shared disk.
         source = None if dataset is None else str(Path(dataset).resolve())
         record = None if record_dir is None else str(Path(record_dir).resolve())
-        return cls(source, split, houses, episodes_per_house, seed, sim, policy, chash, options, record)
+        return cls(source, split, houses, episodes_per_house, seed, config, policy, chash, record)
 
     def load(self) -> EpisodeSet:
         """The job's episode set, loaded once per process."""
@@ -105,32 +97,6 @@ def peak_rss_mb() -> float:
 
 # --- per-process state -------------------------------------------------------------------------
 
-class _TimedEnv:
-    """Times the simulator's reset/step (ray casting included) as the session sees it; the policy
-    keeps the bare environment so its own queries are not counted as simulation."""
-
-    def __init__(self, env: BuiltinSimulator) -> None:
-        self._env = env
-        self.seconds = 0.0
-
-    def __getattr__(self, name: str):
-        return getattr(self._env, name)
-
-    def reset(self, episode: Episode):
-        t0 = time.perf_counter()
-        try:
-            return self._env.reset(episode)
-        finally:
-            self.seconds += time.perf_counter() - t0
-
-    def step(self, action):
-        t0 = time.perf_counter()
-        try:
-            return self._env.step(action)
-        finally:
-            self.seconds += time.perf_counter() - t0
-
-
 @dataclass
 class _StageTotals:
     """Sums Decision.timings_ms over an episode (map-based agents report their stages there)."""
@@ -148,41 +114,32 @@ class _JobState:
         self.job = job
         check_policy(job.policy)
         self.episodes = load_episode_set(job.dataset, job.split, houses=job.houses,
-                                         episodes_per_house=job.episodes_per_house, seed=job.seed, cfg=job.sim)
+                                         episodes_per_house=job.episodes_per_house, seed=job.seed, cfg=job.config)
         self.by_key = {ep.key: ep for ep in self.episodes.episodes}
-        self.envs: OrderedDict[str, tuple[BuiltinSimulator, object]] = OrderedDict()
-        self.ctx = RunContext(policy=job.policy, config_hash=job.config_hash)
+        self.runner = Runner(job.config, seed=job.seed, config_hash=job.config_hash)
 
     def run(self, key: str) -> dict:
         episode = self.by_key.get(key)
         if episode is None:
             raise L3MVNError(f"episode {key!r} is not in {self.episodes.name}/{self.episodes.split}")
         t0 = time.perf_counter()
-        floor = f"{episode.scene}/{episode.floor}"
-        if floor in self.envs:
-            self.envs.move_to_end(floor)
-        else:
-            env = BuiltinSimulator(self.episodes.scene_of(episode), self.job.sim)
-            self.envs[floor] = (env, make_policy(self.job.policy, env, self.job.seed, self.job.options))
-            while len(self.envs) > ENV_CACHE_SIZE:
-                self.envs.popitem(last=False)
-        env, policy = self.envs[floor]
-        setup_s = time.perf_counter() - t0
-        timed, stages, bus = _TimedEnv(env), _StageTotals(), EventBus()
+        stages, bus = _StageTotals(), EventBus()
         bus.subscribe(stages)
         if self.job.record_dir is not None:
             Recorder.for_episode(self.job.record_dir, self.episodes.name, episode, self.job.policy).attach(bus)
-        t1 = time.perf_counter()
-        result = run_episode(timed, policy, episode, self.ctx, bus=bus)
-        run_s = time.perf_counter() - t1
+        session = self.runner.session(self.episodes.scene_of(episode), self.job.policy, bus)
+        setup_s = time.perf_counter() - t0
+        session.start(episode)
+        result = session.run()
+        run_s = time.perf_counter() - t0 - setup_s
         row = result.to_json()
-        row["config"] = config_dict(self.job.sim, self.job.options)
+        row["config"] = config_dict(self.job.config)
         row["worker"] = worker_id()
         row["timing"] = {
             "total_s": round(setup_s + run_s, 4),
             "setup_s": round(setup_s, 4),
-            "sim_s": round(timed.seconds, 4),
-            "policy_s": round(run_s - timed.seconds, 4),  # policy and loop bookkeeping
+            "sim_s": round(session.sim_seconds, 4),
+            "policy_s": round(run_s - session.sim_seconds, 4),  # policy and loop bookkeeping
             "stages_ms": {k: round(v, 3) for k, v in sorted(stages.ms.items())},
         }
         row["peak_rss_mb"] = peak_rss_mb()

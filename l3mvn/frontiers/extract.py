@@ -34,7 +34,8 @@ import cv2
 import numpy as np
 
 from l3mvn.errors import L3MVNError
-from l3mvn.frontiers.types import Frontier, FrontierConfig
+from l3mvn.config import FrontierConfig
+from l3mvn.frontiers.types import Frontier
 
 _NEIGHBOURS = np.array([(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)], dtype=np.int64)
 
@@ -47,6 +48,8 @@ def extract_frontiers(
     category_maps: np.ndarray,
     category_names: tuple[str, ...],
     cfg: FrontierConfig = FrontierConfig(),
+    *,
+    resolution_m: float,
     blocked: np.ndarray | None = None,
     blocked_radius_cells: float | np.ndarray = 0.0,
     agent_heading: float | None = None,
@@ -55,7 +58,7 @@ def extract_frontiers(
 
     explored, obstacle: bool (H, W); agent_cell: (row, col); distance_m: float (H, W) geodesic
     distance from the agent, inf where unreachable; category_maps: bool (K, H, W) named by
-    ``category_names``. blocked: (N, 2) cells the caller is done with (reached or unreachable
+    ``category_names``; resolution_m: the map's cell size (the objects window is in metres). blocked: (N, 2) cells the caller is done with (reached or unreachable
     goals); a cluster whose candidate lies within ``blocked_radius_cells`` of one (a radius, or one
     per blocked cell) is dropped before the far limit, so frontiers beyond it stay eligible once the
     near ones are used up.
@@ -108,7 +111,7 @@ def extract_frontiers(
     ranked = np.lexsort((keep, costs[keep], -score))[: cfg.top_k]
     order = keep[ranked]
     s_cu = _normalise(score[ranked])
-    objects = _window_objects(centers[order], category_maps, category_names, cfg.window_cells)
+    objects = _window_objects(centers[order], category_maps, category_names, cfg.window_cells(resolution_m))
     return [
         Frontier(
             id=rank,

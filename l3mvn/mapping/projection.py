@@ -16,7 +16,7 @@ import numpy as np
 
 from l3mvn.config import SimConfig
 from l3mvn.errors import L3MVNError
-from l3mvn.sim.types import Pose
+from l3mvn.types import Pose
 
 
 @dataclass(frozen=True)

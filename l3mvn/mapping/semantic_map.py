@@ -2,7 +2,7 @@
 
 Map frame: the start pose's position sits at the corner between the four centre cells, axes are the
 odometry axes (heading preserved), so a cell is ``(row, col) = (floor(dy / res) + M/2, floor(dx / res)
-+ M/2)`` with ``dx, dy`` the offset from the start (see ``l3mvn.sim.types`` for the world frame).
++ M/2)`` with ``dx, dy`` the offset from the start (see ``l3mvn.types`` for the world frame).
 Heights are measured from the floor the agent stands on (z = 0).
 """
 
@@ -13,85 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from l3mvn.config import MapConfig, SimConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.mapping.projection import CameraIntrinsics, depth_to_points
-from l3mvn.sim.types import Pose
-
-
-@dataclass(frozen=True)
-class MapConfig:
-    """Every constant of map building (spec defaults; 36 m is the Gibson map, use 48 m for large houses).
-
-    Height bands, in metres above the floor: obstacle = [obstacle_min_height_m, camera height +
-    obstacle_above_camera_m]; explored = [floor_min_height_m, obstacle top] (floor points included);
-    categories = [floor_min_height_m, category_max_height_m], deliberately not tied to the obstacle band
-    so an object seen over low furniture or on the floor still registers.
-    """
-
-    resolution_m: float = 0.05
-    # 48 m: an agent 18 m from its start fell off a 36 m map in a 32 m wide Gibson house (Lindenwood).
-    map_size_m: float = 48.0
-    local_map_divisor: int = 2
-    obstacle_min_height_m: float = 0.25
-    obstacle_above_camera_m: float = 0.5
-    # Points below this are depth noise or a hole in the floor, not evidence about this floor.
-    floor_min_height_m: float = -0.4
-    # SemExp's voxel grid top: ceiling-mounted or tall objects (a wall TV) still count.
-    category_max_height_m: float = 3.6
-    category_point_threshold: int = 5
-    max_depth_m: float = 5.0
-    # The agent's own body: the cells it stands on are explored even though the camera cannot see them.
-    footprint_radius_m: float = 0.18
-    # Free-space carving: cells between the camera and what it saw are explored too (bearings are
-    # binned this finely across the view; 0 turns it off). Without it, floor nearer than the lowest
-    # image row (1.4 m at tilt 0) stays unexplored and leaves phantom frontiers along every wall.
-    free_space_bins: int = 160
-    # A cell is "looked at" once seen from within this distance: close enough that an object there
-    # would have mapped to enough cells to confirm. Explored from farther (a room seen through a
-    # door across the house) tells where the floor is, not what stands on it.
-    look_distance_m: float = 2.5
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.resolution_m) and self.resolution_m > 0):
-            raise L3MVNError(f"resolution_m must be positive, got {self.resolution_m}")
-        cells = self.map_size_m / self.resolution_m
-        whole = math.isfinite(cells) and abs(cells - round(cells)) < 1e-6
-        if not (whole and cells >= 2 and round(cells) % 2 == 0):
-            raise L3MVNError(
-                "map_size_m / resolution_m must be an even whole number of cells (e.g. 36 or 48 m at "
-                f"0.05 m), got {self.map_size_m} / {self.resolution_m}"
-            )
-        if self.local_map_divisor < 1 or self.map_cells % self.local_map_divisor:
-            raise L3MVNError(
-                f"local_map_divisor must be >= 1 and divide the {self.map_cells} map cells, "
-                f"got {self.local_map_divisor}"
-            )
-        if not self.floor_min_height_m < self.obstacle_min_height_m:
-            raise L3MVNError("height bands must satisfy floor_min_height_m < obstacle_min_height_m")
-        if not self.floor_min_height_m < self.category_max_height_m:
-            raise L3MVNError("height bands must satisfy floor_min_height_m < category_max_height_m")
-        if not 1 <= self.category_point_threshold <= np.iinfo(np.uint16).max:
-            raise L3MVNError(
-                f"category_point_threshold must lie in 1..65535, got {self.category_point_threshold}"
-            )
-        if not self.max_depth_m > 0:
-            raise L3MVNError(f"max_depth_m must be positive, got {self.max_depth_m}")
-        if not (math.isfinite(self.look_distance_m) and self.look_distance_m > 0):
-            raise L3MVNError(f"look_distance_m must be positive, got {self.look_distance_m}")
-        if not self.footprint_radius_m >= 0:
-            raise L3MVNError(f"footprint_radius_m must be >= 0, got {self.footprint_radius_m}")
-
-    @property
-    def map_cells(self) -> int:
-        return int(round(self.map_size_m / self.resolution_m))
-
-    @property
-    def local_cells(self) -> int:
-        return self.map_cells // self.local_map_divisor
-
-    @property
-    def footprint_radius_cells(self) -> int:
-        return int(math.floor(self.footprint_radius_m / self.resolution_m + 1e-9))
+from l3mvn.types import Pose
 
 
 @dataclass(frozen=True, eq=False)
@@ -219,12 +144,19 @@ class SemanticMapper:
     k = category_names[k - 1]) or None, the odometry pose and the camera tilt in radians.
     """
 
-    def __init__(self, cfg: MapConfig, intrinsics: CameraIntrinsics, category_names: tuple[str, ...]) -> None:
+    def __init__(self, cfg: MapConfig, intrinsics: CameraIntrinsics, category_names: tuple[str, ...], *,
+                 max_depth_m: float, body_radius_m: float) -> None:
+        """``max_depth_m``: the sensor's range (readings at or beyond it are saturation, not a
+        surface); ``body_radius_m``: the agent's, whose footprint counts as explored."""
         names = tuple(category_names)
         if len(set(names)) != len(names):
             raise L3MVNError(f"duplicate map categories in {names}")
+        if not (max_depth_m > 0 and body_radius_m >= 0):
+            raise L3MVNError(f"max_depth_m must be > 0 and body_radius_m >= 0, got {max_depth_m}, {body_radius_m}")
         self.cfg = cfg
         self.intrinsics = intrinsics
+        self.max_depth_m = max_depth_m
+        self.footprint_radius_cells = int(math.floor(body_radius_m / cfg.resolution_m + 1e-9))
         self.category_names = names
         self.obstacle_max_height_m = intrinsics.camera_height_m + cfg.obstacle_above_camera_m
         if not cfg.obstacle_min_height_m < self.obstacle_max_height_m:
@@ -244,6 +176,13 @@ class SemanticMapper:
         self._cell = (m // 2, m // 2)
         self._heading = 0.0
 
+    @classmethod
+    def for_sim(cls, cfg: MapConfig, sim: SimConfig, height: int, width: int,
+                category_names: tuple[str, ...]) -> "SemanticMapper":
+        """A mapper for the simulated robot's camera fed ``height`` x ``width`` frames."""
+        return cls(cfg, CameraIntrinsics.from_sim(sim, height, width), category_names,
+                   max_depth_m=sim.max_depth_m, body_radius_m=sim.agent_radius_m)
+
     @property
     def map(self) -> SemanticMap:
         if self._start is None:
@@ -260,7 +199,7 @@ class SemanticMapper:
             agent_cell=self._cell,
             agent_heading=self._heading,
             local_cells=self.cfg.local_cells,
-            footprint_radius_cells=self.cfg.footprint_radius_cells,
+            footprint_radius_cells=self.footprint_radius_cells,
         )
 
     def reset(self, start_pose: Pose) -> SemanticMap:
@@ -296,7 +235,7 @@ class SemanticMapper:
                 )
 
         relative = Pose(dx, dy, pose.heading)
-        cloud = depth_to_points(depth, self.intrinsics, relative, tilt, semantic, cfg.max_depth_m)
+        cloud = depth_to_points(depth, self.intrinsics, relative, tilt, semantic, self.max_depth_m)
         self._splat(cloud.points, cloud.labels, dx, dy)
         self._carve(cloud.points, dx, dy, pose.heading)
         self._draw_visited(self._cell, cell)
@@ -377,7 +316,7 @@ class SemanticMapper:
         self._visited[rows, cols] = True
 
     def _mark_footprint(self, cell: tuple[int, int]) -> None:
-        rr, cc = _footprint_cells(cell, self.cfg.footprint_radius_cells, self.cfg.map_cells)
+        rr, cc = _footprint_cells(cell, self.footprint_radius_cells, self.cfg.map_cells)
         self._explored[rr, cc] = True
         self._looked[rr, cc] = True
 

@@ -23,9 +23,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from l3mvn.config import PlannerConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.planning.fmm import GeodesicField, Window, distance_field
-from l3mvn.sim.types import Action
+from l3mvn.types import Action
 
 # FMM is a first/second-order scheme: its distances differ from the true geodesic by a few
 # percent, so every comparison between an FMM value and a straight-line bound gets this slack.
@@ -39,60 +40,6 @@ _RAY_STEP_CELLS = 0.5
 # equally near an unreachable goal) go to the cell nearest the goal, resp. the agent; the weight is
 # far below one cell so it never overrides a real difference in distance.
 _TIE_WEIGHT = 1e-3
-
-
-@dataclass(frozen=True)
-class PlannerConfig:
-    """Local-policy constants (spec "Local policy"); distances in metres unless named ``_cells``."""
-
-    resolution_m: float = 0.05
-    # The agent radius is 0.18 m (3.6 cells); 3 cells (SemExp's disk(3)) leaves slack for doors
-    # and for map noise.
-    obstacle_dilation_cells: int = 3
-    goal_dilation_m: float = 0.5
-    # The short-term goal is the cell nearest the goal (geodesically) that the agent sees in a
-    # straight free line within this distance; 0.25 m gives SemExp's ring.
-    stg_lookahead_m: float = 1.0
-    turn_threshold_deg: float = 15.0
-    collision_threshold_m: float = 0.10
-    # A failed forward step blocks a rectangle ahead of the agent: it starts this many cells ahead,
-    # is this long, and this wide, widening by 2 cells per consecutive collision up to the maximum.
-    collision_mark_offset_cells: int = 2
-    collision_mark_length_cells: int = 3
-    collision_mark_width_cells: int = 5
-    collision_mark_max_width_cells: int = 9
-    # Stuck: this many collisions, or less than this displacement, within the last window of steps.
-    stuck_window_steps: int = 50
-    stuck_collisions: int = 20
-    stuck_min_displacement_m: float = 0.5
-    # Smallest margin of the planning window around agent and goal (it grows when a path needs it).
-    window_margin_m: float = 2.0
-
-    def __post_init__(self) -> None:
-        positive = (
-            "resolution_m", "goal_dilation_m", "stg_lookahead_m", "turn_threshold_deg",
-            "collision_threshold_m", "collision_mark_offset_cells", "collision_mark_length_cells",
-            "collision_mark_width_cells", "stuck_window_steps", "stuck_collisions", "window_margin_m",
-        )
-        for name in positive:
-            if getattr(self, name) <= 0:
-                raise L3MVNError(f"{name} must be positive, got {getattr(self, name)}")
-        if self.obstacle_dilation_cells < 0 or self.stuck_min_displacement_m < 0:
-            raise L3MVNError("obstacle_dilation_cells and stuck_min_displacement_m must be >= 0")
-        if self.collision_mark_max_width_cells < self.collision_mark_width_cells:
-            raise L3MVNError("collision_mark_max_width_cells must be >= collision_mark_width_cells")
-        if self.stuck_collisions > self.stuck_window_steps:
-            raise L3MVNError("stuck_collisions cannot exceed stuck_window_steps (it could never trigger)")
-        if self.turn_threshold_deg >= 180:
-            raise L3MVNError(f"turn_threshold_deg must be below 180, got {self.turn_threshold_deg}")
-
-    @property
-    def goal_dilation_cells(self) -> int:
-        return int(round(self.goal_dilation_m / self.resolution_m))
-
-    @property
-    def lookahead_cells(self) -> int:
-        return max(1, int(round(self.stg_lookahead_m / self.resolution_m)))
 
 
 @dataclass(frozen=True)
@@ -132,13 +79,18 @@ class LocalPlanner:
     ``reset`` between episodes. ``fmm_runs`` counts the marches so far (for speed reports).
     """
 
-    def __init__(self, cfg: PlannerConfig | None = None) -> None:
-        self.cfg = cfg or PlannerConfig()
-        self._obstacle_kernel = _disk(self.cfg.obstacle_dilation_cells)
-        self._goal_kernels = {self.cfg.goal_dilation_cells: _disk(self.cfg.goal_dilation_cells)}
-        escape = self.cfg.obstacle_dilation_cells + 1
+    def __init__(self, cfg: PlannerConfig, resolution_m: float) -> None:
+        """``resolution_m``: the cell size of the maps it will plan on (the agent's map)."""
+        if not (math.isfinite(resolution_m) and resolution_m > 0):
+            raise L3MVNError(f"resolution_m must be positive, got {resolution_m}")
+        self.cfg, self.resolution_m = cfg, resolution_m
+        self.goal_dilation_cells = int(round(cfg.goal_dilation_m / resolution_m))
+        self.lookahead_cells = max(1, int(round(cfg.stg_lookahead_m / resolution_m)))
+        self._obstacle_kernel = _disk(cfg.obstacle_dilation_cells)
+        self._goal_kernels = {self.goal_dilation_cells: _disk(self.goal_dilation_cells)}
+        escape = cfg.obstacle_dilation_cells + 1
         self._escape_offsets = np.argwhere(_disk(escape) > 0) - escape
-        self._ray_rows, self._ray_cols = _rays(self.cfg.lookahead_cells)
+        self._ray_rows, self._ray_cols = _rays(self.lookahead_cells)
         self.reset()
 
     def reset(self) -> None:
@@ -187,7 +139,6 @@ class LocalPlanner:
         (approached from any free side), but it reaches through walls: an exploration goal needs
         a small one, or a frontier behind a wall reads as reached from the wrong room.
         """
-        cfg = self.cfg
         obstacle = self._check_map(obstacle)
         agent = _check_cell(agent_cell, obstacle.shape)
         if not math.isfinite(heading):
@@ -218,9 +169,9 @@ class LocalPlanner:
             distance = math.inf
             field, trav = self._fallback_field(obstacle, agent, goal_rows, goal_cols)
         elif d_agent > 0:
-            distance = d_agent + dilation * cfg.resolution_m
+            distance = d_agent + dilation * self.resolution_m
         else:
-            distance = math.dist(nearest_goal, agent) * cfg.resolution_m
+            distance = math.dist(nearest_goal, agent) * self.resolution_m
         if stg is None:
             stg = self._short_term_goal(field, trav, agent, nearest_goal)
         action = self._action(agent, heading, stg if stg != agent else nearest_goal)
@@ -253,14 +204,13 @@ class LocalPlanner:
         beyond them cannot shorten a path, so every cell of the window is exact (~20-40 ms for
         a house). Cells outside the window read ``inf``.
         """
-        cfg = self.cfg
         obstacle = self._check_map(obstacle)
         agent = _check_cell(agent_cell, obstacle.shape)
         rows, cols = np.array([agent[0]]), np.array([agent[1]])
         if max_distance_m is not None:
             if max_distance_m <= 0:
                 raise L3MVNError(f"max_distance_m must be positive or None, got {max_distance_m}")
-            margin = int(math.ceil(max_distance_m / cfg.resolution_m)) + 1
+            margin = int(math.ceil(max_distance_m / self.resolution_m)) + 1
             window = Window.bounding(rows, cols, margin, obstacle.shape)
         else:
             if targets is not None:
@@ -269,19 +219,19 @@ class LocalPlanner:
             window = self._whole_window(obstacle, rows, cols)
         trav = self._with_escape(self._traversible(obstacle, window), obstacle, window, agent)
         local = np.array([[agent[0] - window.r0, agent[1] - window.c0]])
-        values = distance_field(trav, local, resolution_m=cfg.resolution_m, limit_m=max_distance_m)
+        values = distance_field(trav, local, resolution_m=self.resolution_m, limit_m=max_distance_m)
         self.fmm_runs += 1
         limit = math.inf if max_distance_m is None else float(max_distance_m)
         return GeodesicField(values, window, obstacle.shape, limit)
 
     def _dilation_cells(self, goal_dilation_m: float | None) -> int:
         if goal_dilation_m is None:
-            return self.cfg.goal_dilation_cells
+            return self.goal_dilation_cells
         if not (math.isfinite(goal_dilation_m) and 0 <= goal_dilation_m <= self.cfg.goal_dilation_m):
             raise L3MVNError(
                 f"goal_dilation_m must lie in [0, {self.cfg.goal_dilation_m}] (the config's), got {goal_dilation_m}"
             )
-        return int(round(goal_dilation_m / self.cfg.resolution_m))
+        return int(round(goal_dilation_m / self.resolution_m))
 
     # -- map preparation ------------------------------------------------------------------------
 
@@ -358,10 +308,10 @@ class LocalPlanner:
         goal may be unreachable, which only that window can tell).
         """
         cfg = self.cfg
-        res = cfg.resolution_m
+        res = self.resolution_m
         rows = np.append(goal_rows, agent[0])
         cols = np.append(goal_cols, agent[1])
-        lookahead = cfg.lookahead_cells * res
+        lookahead = self.lookahead_cells * res
         straight = math.dist(agent, nearest_goal) * res
         margin = max(cfg.window_margin_m, _margin_for(straight + lookahead + _slack(straight), straight))
         pad = dilation + 1
@@ -396,7 +346,7 @@ class LocalPlanner:
             if extent is not None:
                 rows.append(np.array(extent[:2]))
                 cols.append(np.array(extent[2:]))
-        margin = max(self.cfg.obstacle_dilation_cells, self.cfg.goal_dilation_cells) + 2
+        margin = max(self.cfg.obstacle_dilation_cells, self.goal_dilation_cells) + 2
         return Window.bounding(np.concatenate(rows), np.concatenate(cols), margin, obstacle.shape)
 
     def _reusable(
@@ -427,10 +377,10 @@ class LocalPlanner:
         d_agent = float(field.values[local])
         if not math.isfinite(d_agent):
             return None
-        res = self.cfg.resolution_m
+        res = self.resolution_m
         if not self._exact(window, obstacle):
             bound = min(field.limit_m, self._exit_bound_m(agent, window, cache.sources, obstacle.shape))
-            if d_agent + self.cfg.lookahead_cells * res + _slack(d_agent) > bound:
+            if d_agent + self.lookahead_cells * res + _slack(d_agent) > bound:
                 return None
         stg = self._short_term_goal(field, trav, agent, nearest_goal)
         br, bc = _cells(cache.traversible & ~trav)
@@ -468,13 +418,13 @@ class LocalPlanner:
         for open_side, mr, mc in sides:
             if open_side:
                 best = min(best, float(np.hypot(mr - agent[0], mc - agent[1]).min()))
-        return best * self.cfg.resolution_m
+        return best * self.resolution_m
 
     def _fallback_field(
         self, obstacle: np.ndarray, agent: tuple[int, int], goal_rows: np.ndarray, goal_cols: np.ndarray
     ) -> tuple[GeodesicField, np.ndarray]:
         """Goal unreachable: a field to the reachable cell nearest (straight-line) to the goal."""
-        res = self.cfg.resolution_m
+        res = self.resolution_m
         reach = self.distance_from_agent(obstacle, agent, targets=np.stack([goal_rows, goal_cols], axis=1))
         window = reach.window
         trav = self._with_escape(self._traversible(obstacle, window), obstacle, window, agent)
@@ -504,7 +454,7 @@ class LocalPlanner:
         inside = (rows >= 0) & (rows < window.shape[0]) & (cols >= 0) & (cols < window.shape[1])
         rows, cols = np.where(inside, rows, 0), np.where(inside, cols, 0)
         visible = np.logical_and.accumulate(inside & trav[rows, cols], axis=1)
-        tie = _TIE_WEIGHT * self.cfg.resolution_m
+        tie = _TIE_WEIGHT * self.resolution_m
         score = field.values[rows, cols] + tie * np.hypot(
             rows + window.r0 - nearest_goal[0], cols + window.c0 - nearest_goal[1]
         )
@@ -567,7 +517,7 @@ class LocalPlanner:
         if len(self._recent_cells) < cfg.stuck_window_steps:
             return False
         cells = np.asarray(self._recent_cells)
-        spread = np.hypot(cells[:, 0] - agent[0], cells[:, 1] - agent[1]).max() * cfg.resolution_m
+        spread = np.hypot(cells[:, 0] - agent[0], cells[:, 1] - agent[1]).max() * self.resolution_m
         return bool(spread < cfg.stuck_min_displacement_m)
 
 

@@ -17,11 +17,11 @@ from functools import lru_cache
 
 import numpy as np
 
+from l3mvn.config import SELECTIONS
 from l3mvn.errors import L3MVNError
 from l3mvn.frontiers import Frontier
 from l3mvn.policies.global_policies import Selection
 
-SELECTIONS = ("paper", "official_code")
 BOUND = (0.15, 0.30)
 
 

@@ -14,37 +14,44 @@ import zlib
 import numpy as np
 from scipy import ndimage as ndi
 
-from l3mvn.eval.geodesic import GoalRegion, geodesic_field
 from l3mvn.policies.global_policies import Selection
 from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.sim.types import Action, Episode, Observation, Pose
+from l3mvn.types import Action, Episode, Observation, Pose
+from l3mvn.task import GoalRegion, ObjectNavTask, geodesic_field
 
 _NEIGHBOURS = np.array([(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)])
 
 
 class OraclePolicy:
-    """Follows the ground-truth shortest path to the success region, then stops."""
+    """Follows the ground-truth shortest path to the success region, then stops. It plans on the
+    built-in simulator's own motion model (``forward_result``), so it runs on that backend only."""
 
     name = "oracle"
     lookahead_cells = 8
+    stuck = False  # it reads the true distance field: never stuck by its own account
 
-    def __init__(self, env: BuiltinSimulator) -> None:
-        self.env = env
+    def __init__(self, env: BuiltinSimulator, task: ObjectNavTask) -> None:
+        self.env, self.task = env, task
+        self._goal = ""
         self._fields: dict[str, np.ndarray] = {}
         self._field: np.ndarray | None = None
 
     def reset(self, episode: Episode) -> None:
-        if episode.goal not in self._fields:
+        self.change_target(episode.goal)
+
+    def change_target(self, goal: str) -> None:
+        """Walk to ``goal`` from here on (episode start, or the dashboard's mid-episode change)."""
+        if goal not in self._fields:
             scene = self.env.scene
-            region = self.env.region(episode.goal).region & scene.walkable
-            self._fields[episode.goal] = geodesic_field(scene.walkable, region, scene.resolution_m)
-        self._field = self._fields[episode.goal]
+            region = self.task.region(goal).region & scene.walkable
+            self._fields[goal] = geodesic_field(scene.walkable, region, scene.resolution_m)
+        self._goal, self._field = goal, self._fields[goal]
 
     def act(self, obs: Observation) -> Action:
         """Greedy on the true dynamics: of the 360/turn headings, head for the one whose forward
         move lands lowest on the distance field; move when already facing it."""
         assert self._field is not None
-        if self.env.in_success_region():
+        if self.task.in_success_region(obs.pose, self._goal):
             return Action.STOP
         scene, pose = self.env.scene, obs.pose
         here = self._value(pose.x, pose.y)
@@ -96,16 +103,16 @@ def frontier_goal_distances(frontiers, sem_map, region: GoalRegion) -> np.ndarra
     ], dtype=np.float64)
 
 
-def object_distances(env: BuiltinSimulator, goal: str) -> GoalRegion:
+def object_distances(task: ObjectNavTask, goal: str) -> GoalRegion:
     """Ground-truth geodesic distance over the floor to the floor beside each goal object: the
     traversible cells nearest to it (within the agent's radius and a cell, or the smallest distance
     up to the success distance at which the instance has floor), as a GoalRegion for its lookups."""
-    scene = env.scene
+    scene, cfg = task.scene, task.cfg
     res = scene.resolution_m
     labels, _ = ndi.label(scene.category_mask(goal), structure=np.ones((3, 3), dtype=bool))
     trav = scene.traversible
-    first = math.ceil(env.cfg.agent_radius_m / res) + 1
-    last = max(first, math.ceil(env.cfg.success_distance_m / res))
+    first = math.ceil(cfg.sim.agent_radius_m / res) + 1
+    last = max(first, math.ceil(cfg.task.success_distance_m / res))
     sources = np.zeros_like(trav)
     for box_id, box in enumerate(ndi.find_objects(labels), start=1):
         pad = last + 1
@@ -131,15 +138,15 @@ class FrontierOracle:
 
     name = "oracle-frontier"
 
-    def __init__(self, env: BuiltinSimulator) -> None:
-        self.env = env
+    def __init__(self, task: ObjectNavTask) -> None:
+        self.task = task
         self._distances: dict[str, GoalRegion] = {}
 
     def select(self, frontiers, sem_map, goal, rng):
         if not frontiers:
             return None
         if goal not in self._distances:
-            self._distances[goal] = object_distances(self.env, goal)
+            self._distances[goal] = object_distances(self.task, goal)
         cost = np.array([f.cost for f in frontiers], dtype=np.float64)
         to_goal = frontier_goal_distances(frontiers, sem_map, self._distances[goal])
         if not np.isfinite(to_goal).any():
@@ -160,6 +167,7 @@ class RandomWalkPolicy:
     """Uniformly random actions over the full action space (the paper's random-walk baseline)."""
 
     name = "random-walk"
+    stuck = False
 
     def __init__(self, seed: int = 0) -> None:
         self.seed = seed
@@ -168,6 +176,9 @@ class RandomWalkPolicy:
     def reset(self, episode: Episode) -> None:
         # Seeded by episode, not by order, so results do not depend on scheduling.
         self._rng = np.random.default_rng([self.seed, episode.episode_id, zlib.crc32(episode.scene.encode())])
+
+    def change_target(self, goal: str) -> None:
+        """Random actions whatever the target: nothing to change."""
 
     def act(self, obs: Observation) -> Action:
         return Action(int(self._rng.integers(len(Action))))

@@ -464,7 +464,7 @@ class _Furnisher:
         return max(1, round(long_m / _RES)), max(1, round(short_m / _RES))
 
     def _candidates(self, state: _RoomState, category: str, mode: str, long_c: int, short_c: int):
-        rng, box = self.rng, state.room.interior
+        box = state.room.interior
         if mode == "in":
             host = [p for p in state.placed if p.category == _HOST[category]]
             if host:

@@ -14,7 +14,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from l3mvn.errors import L3MVNError
-from l3mvn.sim.types import Pose
+from l3mvn.types import Pose
 
 GOAL_CATEGORIES: tuple[str, ...] = ("chair", "couch", "potted plant", "bed", "toilet", "tv")
 

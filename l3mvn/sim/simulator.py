@@ -13,14 +13,12 @@ import math
 from functools import cached_property
 
 import numpy as np
-from scipy import ndimage as ndi
 
 from l3mvn.config import SimConfig
 from l3mvn.errors import L3MVNError
-from l3mvn.eval.geodesic import GoalRegion, goal_region
 from l3mvn.scenes.scene import SceneMap
 from l3mvn.sim.render import Renderer
-from l3mvn.sim.types import Action, Episode, Observation, Pose
+from l3mvn.types import Action, Episode, Observation, Pose
 from l3mvn.sim.world import build_world
 
 
@@ -31,14 +29,12 @@ class BuiltinSimulator:
         self.scene = scene
         self.cfg = cfg or SimConfig()
         self.categories = scene.categories
-        self._regions: dict[str, GoalRegion] = {}
         self._episode: Episode | None = None
         self._pose: Pose | None = None
         self._tilt = 0.0
         self._steps = 0
         self._path = 0.0
         self._stopped = False
-        self._walk_labels: np.ndarray | None = None
 
     @cached_property
     def renderer(self) -> Renderer:
@@ -48,7 +44,7 @@ class BuiltinSimulator:
     def reset(self, episode: Episode) -> Observation:
         if (episode.scene, episode.floor) != (self.scene.name, self.scene.floor):
             raise L3MVNError(f"episode {episode.key} belongs to {episode.scene}/{episode.floor}, not {self.scene.key}")
-        self.region(episode.goal)
+        self._check_goal(episode.goal)
         start = episode.start
         if not self.is_walkable(start.x, start.y):
             raise L3MVNError(
@@ -87,7 +83,7 @@ class BuiltinSimulator:
 
     def set_goal(self, goal: str) -> None:
         """Retarget the running episode (the dashboard's mid-episode target change)."""
-        self.region(goal)
+        self._check_goal(goal)
         self._episode = dataclasses.replace(self.episode, goal=goal)
 
     @property
@@ -118,31 +114,13 @@ class BuiltinSimulator:
             raise L3MVNError("no episode: call reset() first")
         return self._episode
 
-    def region(self, goal: str) -> GoalRegion:
-        if goal not in self._regions:
-            self._regions[goal] = goal_region(self.scene, goal, self.cfg)
-        return self._regions[goal]
-
-    def distance_to_goal(self) -> float:
-        return self.region(self.episode.goal).distance_at(self.pose.x, self.pose.y)
-
-    def in_success_region(self) -> bool:
-        return self.region(self.episode.goal).contains(self.pose.x, self.pose.y)
-
-    def shortest_path_length(self) -> float:
-        start = self.episode.start
-        return self.region(self.episode.goal).shortest_path_length(start.x, start.y)
+    def _check_goal(self, goal: str) -> None:
+        """Observations label the goal by its category id: the goal must be one of the scene's
+        categories (whether it is present, and where, is the task's business)."""
+        if goal not in self.categories:
+            raise L3MVNError(f"unknown goal {goal!r} for {self.scene.key}; categories: {', '.join(self.categories)}")
 
     # --- mechanics ---------------------------------------------------------------------------
-    def reachable_cells(self, start: Pose) -> tuple[np.ndarray, np.ndarray]:
-        """(rows, cols) of the walkable cells connected to ``start`` (ground truth for analysis)."""
-        if self._walk_labels is None:
-            self._walk_labels, _ = ndi.label(self.scene.walkable, structure=np.ones((3, 3), dtype=bool))
-        r, c = self.scene.cell_of(start.x, start.y)
-        if not self.scene.in_bounds(r, c) or self._walk_labels[r, c] == 0:
-            return np.empty(0, np.int64), np.empty(0, np.int64)
-        return np.nonzero(self._walk_labels == self._walk_labels[r, c])
-
     def is_walkable(self, x: float, y: float) -> bool:
         r, c = self.scene.cell_of(x, y)
         return self.scene.in_bounds(r, c) and bool(self.scene.walkable[r, c])

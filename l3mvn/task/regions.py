@@ -1,6 +1,6 @@
 """Ground-truth success regions and geodesic distances, computed by Fast Marching on the grid.
 
-Two rules (``SimConfig.success_rule``), and every number says which one it used:
+Two rules (``TaskConfig.success_rule``), and every number says which one it used:
 
 * ``semexp`` (default, behind the paper's Gibson table): success region = goal footprints dilated by a
   1.0 m disk (straight line, through walls), restricted to reachable traversible cells; the shortest
@@ -19,7 +19,7 @@ import numpy as np
 import skfmm
 from scipy import ndimage as ndi
 
-from l3mvn.config import SimConfig
+from l3mvn.config import Config
 from l3mvn.errors import L3MVNError
 from l3mvn.scenes.scene import SceneMap
 
@@ -77,7 +77,7 @@ class GoalRegion:
         return self.distance_at(x, y) + self.length_offset_m
 
 
-def goal_region(scene: SceneMap, goal: str, cfg: SimConfig) -> GoalRegion:
+def goal_region(scene: SceneMap, goal: str, cfg: Config) -> GoalRegion:
     footprint = scene.category_mask(goal)
     if not footprint.any():
         raise L3MVNError(
@@ -86,24 +86,25 @@ def goal_region(scene: SceneMap, goal: str, cfg: SimConfig) -> GoalRegion:
     return footprint_region(scene, footprint, cfg, goal)
 
 
-def footprint_region(scene: SceneMap, footprint: np.ndarray, cfg: SimConfig, label: str) -> GoalRegion:
-    """The success region of any footprint mask under ``cfg.success_rule`` (``goal_region`` passes a
+def footprint_region(scene: SceneMap, footprint: np.ndarray, cfg: Config, label: str) -> GoalRegion:
+    """The success region of any footprint mask under ``cfg.task.success_rule`` (``goal_region`` passes a
     category's; the scene audit passes one instance's); ``label`` names it in the result."""
     res = scene.resolution_m
     trav = scene.traversible
-    radius = int(round(cfg.success_distance_m / res))
-    if cfg.success_rule == "semexp":
+    task = cfg.task
+    radius = int(round(task.success_distance_m / res))
+    if task.success_rule == "semexp":
         # Dilation by a disk = a Euclidean distance threshold (a 41x41 structuring element is slow).
         region = (ndi.distance_transform_edt(~footprint) <= radius) & trav
         dist = geodesic_field(trav, region, res)
-        offset = cfg.success_distance_m
+        offset = task.success_distance_m
     else:
         # The navmesh keeps an agent radius away from objects: let paths cross that margin to touch it.
-        margin = math.ceil(cfg.agent_radius_m / res) + 1
+        margin = math.ceil(cfg.sim.agent_radius_m / res) + 1
         near = ndi.distance_transform_edt(~footprint) <= margin
         to_object = geodesic_field(trav | near, footprint, res)
-        region = trav & (to_object <= cfg.success_distance_m)
+        region = trav & (to_object <= task.success_distance_m)
         dist = geodesic_field(trav, region, res)
         offset = 0.0
-    return GoalRegion(goal=label, rule=cfg.success_rule, region=region & np.isfinite(dist),
+    return GoalRegion(goal=label, rule=task.success_rule, region=region & np.isfinite(dist),
                       distance_m=dist, length_offset_m=offset, resolution_m=res)

@@ -1,4 +1,4 @@
-"""Run episodes with a policy, score them, and append one JSON line per finished episode.
+"""Result files: one JSON line per finished episode, appended, read back for ``--resume``.
 
 A line is written with a single ``write`` of the whole encoded line and flushed, so an interrupted
 run never leaves a partial line (a torn last line from a crashed disk is skipped on ``--resume``).
@@ -8,29 +8,10 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
 from l3mvn.errors import L3MVNError
-from l3mvn.eval.metrics import EpisodeResult
-from l3mvn.events import EventBus
-from l3mvn.session import EpisodeSession
-from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.sim.types import Episode
-
-
-@dataclass
-class RunContext:
-    policy: str
-    config_hash: str
-
-
-def run_episode(env: BuiltinSimulator, policy, episode: Episode, ctx: RunContext,
-                bus: EventBus | None = None) -> EpisodeResult:
-    session = EpisodeSession(env, policy, policy_name=ctx.policy, config_hash=ctx.config_hash, bus=bus)
-    session.start(episode)
-    return session.run()
 
 
 class ResultWriter:

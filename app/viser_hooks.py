@@ -1,0 +1,134 @@
+"""The only places the dashboard reaches past viser's public API, each because viser (1.1) has no hook.
+
+Each function names what it relies on; tests/test_dashboard_security.py drives all of them through a
+real server and websocket client, so a viser upgrade that moves one fails those tests (and the
+handshake check refuses to start an unguarded server) instead of silently dropping a protection.
+"""
+
+from __future__ import annotations
+
+import http
+import logging
+import threading
+from typing import Any, Callable
+
+import viser
+import websockets.asyncio.server
+from viser._messages import GuiUpdateMessage
+from websockets.asyncio.server import ServerConnection
+from websockets.http11 import Request, Response
+
+from l3mvn.errors import L3MVNError
+
+log = logging.getLogger(__name__)
+
+# (Origin headers, Host headers, port the request came in on) -> None to go on, or why it is refused.
+RequestCheck = Callable[[list[str], list[str], int], str | None]
+# (client id, GUI handle uuid, the update's properties) -> True to let viser apply it.
+UpdateCheck = Callable[[int, str, dict[str, Any]], bool]
+
+_serve_lock = threading.Lock()
+
+
+def start_checked_server(check: RequestCheck, **viser_args: Any) -> viser.ViserServer:
+    """``viser.ViserServer(**viser_args)``, with ``check`` run on every HTTP request and websocket handshake.
+
+    websockets' documented handshake hook is ``serve(..., process_request=...)``; viser calls
+    ``websockets.asyncio.server.serve`` itself, on its own thread while ``ViserServer.__init__``
+    waits for the port, and takes no hook of ours. So while the server starts, ``serve`` is one that
+    puts ``check`` in front of viser's own ``process_request`` (which serves the page); a refused
+    request gets 403 and never reaches viser. The lock keeps two dashboards starting at once from
+    swapping ``serve`` under each other. If viser started its server some other way, it is stopped
+    and this raises: better no dashboard than one nobody guards.
+    """
+    real_serve = websockets.asyncio.server.serve
+    guarded = False
+
+    def serve(handler, *args, process_request=None, **kwargs):
+        nonlocal guarded
+        def process(connection: ServerConnection, request: Request) -> Response | Any:
+            refused = _refusal(check, connection, request)
+            if refused is not None:
+                return connection.respond(http.HTTPStatus.FORBIDDEN, refused + "\n")
+            return process_request(connection, request) if process_request is not None else None
+
+        guarded = True
+        return real_serve(handler, *args, process_request=process, **kwargs)
+
+    with _serve_lock:
+        websockets.asyncio.server.serve = serve
+        try:
+            server = viser.ViserServer(**viser_args)
+        finally:
+            websockets.asyncio.server.serve = real_serve
+    if not guarded:
+        server.stop()
+        raise L3MVNError(f"viser {viser.__version__} no longer starts its server through "
+                         "websockets.asyncio.server.serve, so the dashboard cannot check Origin headers; "
+                         "refusing to serve (see app/viser_hooks.py)")
+    return server
+
+
+def _refusal(check: RequestCheck, connection: ServerConnection, request: Request) -> str | None:
+    """``check`` on one request; a check that raises refuses (fail closed) and is logged."""
+    try:
+        return check(request.headers.get_all("Origin"), request.headers.get_all("Host"),
+                     connection.local_address[1])
+    except Exception:
+        log.exception("dashboard: checking a request failed; refusing it")
+        return "refused: the server could not check this request (see its log)"
+
+
+def check_gui_updates(server: viser.ViserServer, check: UpdateCheck) -> None:
+    """Run ``check`` on each GUI update a tab sends, before viser applies it; False drops the update.
+
+    viser applies a tab's update to the shared handle, re-broadcasts it to every other tab, and only
+    then runs ``on_update`` callbacks, so a callback is too late to refuse a value. viser's own
+    handler (``GuiApi._handle_gui_updates``) is registered on the server's websocket with the public
+    ``register_handler``; it is swapped for one that asks ``check`` first. ``unregister_handler``
+    raises if viser stops registering it that way.
+    """
+    websock = server._websock_server
+    apply_update = server.gui._handle_gui_updates
+    websock.unregister_handler(GuiUpdateMessage, apply_update)
+
+    async def checked(client_id: int, message: GuiUpdateMessage) -> None:
+        if check(client_id, message.uuid, message.updates):
+            await apply_update(client_id, message)
+
+    websock.register_handler(GuiUpdateMessage, checked)
+
+
+def ignore_client_messages_except(server: viser.ViserServer, *kept: str) -> None:
+    """Stop viser acting on any message a tab sends but the ``kept`` types (names as on the wire).
+
+    viser answers messages this page never sends, and some reach far: a ShareUrlRequest from any
+    tab opens a public tunnel to this server through viser's share service, FileTransferStartUpload
+    buffers an upload for any control, GuiFormDirtyMessage is relayed to every tab. The dashboard
+    has no share button, upload, form, command, drag or transform control, so everything but what
+    it uses is dropped; viser ignores a message type that has no handler. The handler table
+    (``WebsockServer._incoming_handlers``) is read because viser has no public list of it;
+    ``unregister_handler`` is public.
+    """
+    websock = server._websock_server
+    missing = set(kept) - {message_type.__name__ for message_type in websock._incoming_handlers}
+    if missing:
+        raise L3MVNError(f"viser {viser.__version__} no longer handles {', '.join(sorted(missing))} "
+                         "(see app/viser_hooks.py)")
+    for message_type in list(websock._incoming_handlers):
+        if message_type.__name__ not in kept:
+            websock.unregister_handler(message_type)
+
+
+def handle_uuid(handle: Any) -> str:
+    """The id viser gives a GUI handle on the wire (GuiUpdateMessage.uuid); viser has no public getter."""
+    return handle._impl.uuid
+
+
+def show_value_to(client: viser.ClientHandle, handle: Any) -> None:
+    """Send one tab the value the server holds for ``handle``.
+
+    A tab shows its own edit before the server sees it, so after refusing one the tab must be told
+    the real value; the handle's setter only broadcasts changes, and viser has no per-tab update.
+    """
+    client._websock_connection.queue_message(GuiUpdateMessage(handle_uuid(handle), {"value": handle.value}))

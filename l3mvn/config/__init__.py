@@ -1,0 +1,143 @@
+"""The typed config tree: every setting of a run, each defined once, hashed beside every result.
+
+Sections: ``sim`` (robot and sensors), ``task`` (success and failure measures), ``map``,
+``frontiers``, ``planner``, ``agent`` (the map-based agent's own constants) and ``policy`` (options of
+the named policy). Any field is set from the CLI as ``--set section.field=value`` (a field name that
+only one section has may go without its section); the whole tree is hashed into every result line
+and written beside it, so a number can always be traced to the settings that made it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import typing
+from dataclasses import dataclass, field
+from typing import Any
+
+from l3mvn.config.agent import AgentConfig
+from l3mvn.config.frontiers import EDGE_MODES, UTILITY_MODES, FrontierConfig
+from l3mvn.config.mapping import MapConfig
+from l3mvn.config.planner import PlannerConfig
+from l3mvn.config.policy import SELECTIONS, PolicyConfig
+from l3mvn.config.sim import SimConfig
+from l3mvn.config.task import SUCCESS_RULES, TaskConfig
+from l3mvn.errors import L3MVNError
+
+
+@dataclass(frozen=True)
+class Config:
+    sim: SimConfig = field(default_factory=SimConfig)
+    task: TaskConfig = field(default_factory=TaskConfig)
+    map: MapConfig = field(default_factory=MapConfig)
+    frontiers: FrontierConfig = field(default_factory=FrontierConfig)
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    agent: AgentConfig = field(default_factory=AgentConfig)
+    policy: PolicyConfig = field(default_factory=PolicyConfig)
+
+    def __post_init__(self) -> None:
+        """Checks that span sections (each section checks its own fields)."""
+        agent = self.agent
+        if agent.frontier_reached_m < self.frontiers.min_distance_m:
+            raise L3MVNError("agent.frontier_reached_m must be >= frontiers.min_distance_m (else a dead zone)")
+        if agent.blocked_stop_distance_m >= self.task.success_distance_m:
+            raise L3MVNError(f"agent.blocked_stop_distance_m ({agent.blocked_stop_distance_m} m) must be below "
+                             f"task.success_distance_m ({self.task.success_distance_m} m): a stop there never succeeds")
+        if agent.look_tolerance_deg < self.sim.turn_angle_deg / 2:
+            raise L3MVNError(f"agent.look_tolerance_deg ({agent.look_tolerance_deg}) must be >= half of "
+                             f"sim.turn_angle_deg ({self.sim.turn_angle_deg / 2}): else the agent turns past its "
+                             "goal and back forever")
+        if self.sim.agent_radius_m < self.map.resolution_m / 2:
+            raise L3MVNError("sim.agent_radius_m must be at least half a map cell (map.resolution_m / 2)")
+
+    def replace(self, **sections: Any) -> "Config":
+        return dataclasses.replace(self, **sections)
+
+    def with_frame(self, height: int, width: int) -> "Config":
+        return self.replace(sim=self.sim.with_frame(height, width))
+
+
+SECTIONS = tuple(f.name for f in dataclasses.fields(Config))
+
+
+def config_dict(cfg: Config) -> dict[str, Any]:
+    """The whole tree as plain data (written beside every result)."""
+    return dataclasses.asdict(cfg)
+
+
+def config_hash(cfg: Config, extra: dict | None = None) -> str:
+    """A short stable hash of the tree (and extra settings such as the policy name and seed)."""
+    payload: dict[str, Any] = {"config": config_dict(cfg)}
+    if extra:
+        payload["extra"] = extra
+    blob = json.dumps(payload, sort_keys=True, default=str).encode()
+    return hashlib.sha1(blob).hexdigest()[:12]
+
+
+def override(cfg: Config, assignments: list[str]) -> Config:
+    """Apply ``section.field=value`` strings (from ``--set``), typed by the fields they name; every
+    mistake is one line naming the valid choices, and the sections re-check their ranges."""
+    changes: dict[str, dict[str, Any]] = {}
+    for item in assignments:
+        name, sep, raw = item.partition("=")
+        if not sep:
+            raise L3MVNError(f"--set expects section.field=value, got {item!r}")
+        section, key = _resolve(cfg, name.strip())
+        changes.setdefault(section, {})[key] = _parse(getattr(cfg, section), key, raw.strip(), f"{section}.{key}")
+    try:
+        return dataclasses.replace(cfg, **{s: dataclasses.replace(getattr(cfg, s), **kv) for s, kv in changes.items()})
+    except TypeError as exc:  # a field that is not an __init__ argument
+        raise L3MVNError(f"--set: {exc}") from None
+
+
+def settings(cfg: Config) -> list[str]:
+    """Every settable ``section.field`` of the tree."""
+    return [f"{s}.{f.name}" for s in SECTIONS for f in dataclasses.fields(getattr(cfg, s)) if f.init]
+
+
+def _resolve(cfg: Config, name: str) -> tuple[str, str]:
+    section, dot, key = name.partition(".")
+    if dot:
+        if section not in SECTIONS:
+            raise L3MVNError(f"unknown config section {section!r} in --set {name}; sections: {', '.join(SECTIONS)}")
+        fields = [f.name for f in dataclasses.fields(getattr(cfg, section)) if f.init]
+        if key not in fields:
+            raise L3MVNError(f"unknown setting {key!r} in section {section}; valid: {', '.join(sorted(fields))}")
+        return section, key
+    owners = [s for s in SECTIONS if any(f.name == name and f.init for f in dataclasses.fields(getattr(cfg, s)))]
+    if len(owners) == 1:
+        return owners[0], name
+    if owners:
+        raise L3MVNError(f"setting {name!r} is in several sections: write {' or '.join(f'{s}.{name}' for s in owners)}")
+    raise L3MVNError(f"unknown setting {name!r}; write section.field with a section of {', '.join(SECTIONS)} "
+                     "(`l3mvn config` lists every field)")
+
+
+def _parse(section_cfg: Any, key: str, raw: str, where: str) -> Any:
+    kind = typing.get_type_hints(type(section_cfg))[key]
+    options = [a for a in typing.get_args(kind) if a is not type(None)] or [kind]
+    if raw.lower() == "none":
+        if type(None) in typing.get_args(kind):
+            return None
+        raise L3MVNError(f"setting {where} cannot be none")
+    base = options[0]
+    try:
+        if base is bool:
+            if raw.lower() not in ("true", "false", "1", "0"):
+                raise ValueError(raw)
+            return raw.lower() in ("true", "1")
+        value = base(raw)
+    except (TypeError, ValueError):
+        raise L3MVNError(f"setting {where} expects a {base.__name__}, got {raw!r}") from None
+    if isinstance(value, float) and not math.isfinite(value):
+        raise L3MVNError(f"setting {where} expects a finite number, got {raw!r}")
+    return value
+
+
+__all__ = [
+    "EDGE_MODES", "SECTIONS", "SELECTIONS", "SUCCESS_RULES", "UTILITY_MODES", "AgentConfig", "Config",
+    "FrontierConfig", "MapConfig", "PlannerConfig", "PolicyConfig", "SimConfig", "TaskConfig", "config_dict",
+    "config_hash", "override", "settings",
+]

@@ -1,0 +1,53 @@
+"""The local planner (spec "Local policy"); it plans on the agent's map, at its resolution."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from l3mvn.errors import L3MVNError
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Local-policy constants (spec "Local policy"); distances in metres unless named ``_cells``."""
+
+    # Obstacles grow by 1 cell, not the full agent radius (SemExp's disk(3)): maps' navmeshes
+    # (SemExp channel 0) are already eroded by the radius, and the built-in world keeps walls 2 cells
+    # from where the agent's centre may stand, so a 3-cell dilation closes real doorways of Gibson houses.
+    obstacle_dilation_cells: int = 1
+    goal_dilation_m: float = 0.5
+    # The short-term goal is the cell nearest the goal (geodesically) that the agent sees in a
+    # straight free line within this distance; 0.25 m gives SemExp's ring.
+    stg_lookahead_m: float = 1.0
+    turn_threshold_deg: float = 15.0
+    collision_threshold_m: float = 0.10
+    # A failed forward step blocks a rectangle ahead of the agent: it starts this many cells ahead,
+    # is this long, and this wide, widening by 2 cells per consecutive collision up to the maximum.
+    collision_mark_offset_cells: int = 2
+    collision_mark_length_cells: int = 3
+    collision_mark_width_cells: int = 5
+    collision_mark_max_width_cells: int = 9
+    # Stuck: this many collisions, or less than this displacement, within the last window of steps.
+    stuck_window_steps: int = 50
+    stuck_collisions: int = 20
+    stuck_min_displacement_m: float = 0.5
+    # Smallest margin of the planning window around agent and goal (it grows when a path needs it).
+    window_margin_m: float = 2.0
+
+    def __post_init__(self) -> None:
+        positive = (
+            "goal_dilation_m", "stg_lookahead_m", "turn_threshold_deg",
+            "collision_threshold_m", "collision_mark_offset_cells", "collision_mark_length_cells",
+            "collision_mark_width_cells", "stuck_window_steps", "stuck_collisions", "window_margin_m",
+        )
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise L3MVNError(f"{name} must be positive, got {getattr(self, name)}")
+        if self.obstacle_dilation_cells < 0 or self.stuck_min_displacement_m < 0:
+            raise L3MVNError("obstacle_dilation_cells and stuck_min_displacement_m must be >= 0")
+        if self.collision_mark_max_width_cells < self.collision_mark_width_cells:
+            raise L3MVNError("collision_mark_max_width_cells must be >= collision_mark_width_cells")
+        if self.stuck_collisions > self.stuck_window_steps:
+            raise L3MVNError("stuck_collisions cannot exceed stuck_window_steps (it could never trigger)")
+        if self.turn_threshold_deg >= 180:
+            raise L3MVNError(f"turn_threshold_deg must be below 180, got {self.turn_threshold_deg}")

@@ -1,0 +1,38 @@
+"""The ObjectNav task: what counts as success, and the thresholds behind each failure cause."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from l3mvn.errors import L3MVNError
+
+SUCCESS_RULES = ("semexp", "geodesic")
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Success rule and distance (SemExp's Gibson rule by default, as in the paper's table), and the
+    measures that name a failure."""
+
+    success_rule: str = "semexp"
+    success_distance_m: float = 1.0
+    # The target counts as seen once this share of a frame shows it with valid depth.
+    seen_fraction: float = 0.001
+    # Forward moves over which the collision rate is measured; at this rate or above a run that ran
+    # out of steps is "stuck".
+    collision_window: int = 50
+    stuck_collision_rate: float = 0.5
+    # Map coverage above which a target never seen counts as hidden rather than not yet explored.
+    explored_coverage: float = 0.9
+
+    def __post_init__(self) -> None:
+        if self.success_rule not in SUCCESS_RULES:
+            raise L3MVNError(f"unknown success rule {self.success_rule!r}; choose one of {', '.join(SUCCESS_RULES)}")
+        if not (math.isfinite(self.success_distance_m) and self.success_distance_m > 0):
+            raise L3MVNError(f"success_distance_m must be a positive finite number, got {self.success_distance_m}")
+        if self.collision_window < 1:
+            raise L3MVNError(f"collision_window must be >= 1, got {self.collision_window}")
+        for name in ("seen_fraction", "stuck_collision_rate", "explored_coverage"):
+            if not 0 < getattr(self, name) <= 1:
+                raise L3MVNError(f"{name} must lie in (0, 1], got {getattr(self, name)}")
