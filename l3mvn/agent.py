@@ -405,6 +405,8 @@ class MapAgent:
     def _select(self, sem_map: SemanticMap) -> None:
         self._since_select = 0
         sel = self.global_policy.select(self._frontiers, sem_map, self.goal, self.rng)
+        if sel is not None and sel.language:
+            self._frontiers = _with_language(self._frontiers, sel)
         if sel is None:  # nothing left to explore: wander to a random free cell of the local map
             win = sem_map.local_window()
             free = np.argwhere(~win.obstacle & ~win.explored) if (~win.explored).any() else np.argwhere(~win.obstacle)
@@ -460,3 +462,11 @@ def _straight_m(sem_map: SemanticMap, mask: np.ndarray) -> float:
 def _within(mask: np.ndarray, radius_cells: float) -> np.ndarray:
     """Cells whose centre lies within ``radius_cells`` (straight line) of a cell of ``mask``."""
     return distance_to(mask, radius_cells) <= radius_cells
+
+
+def _with_language(frontiers: list[Frontier], sel: Selection) -> list[Frontier]:
+    """The frontiers as the decision shows them: each with its language scores, the chosen one with
+    the policy's reason."""
+    return [replace(f, queries=ls.queries, llm_scores=ls.llm_scores, s_llm=ls.s_llm, fused=ls.fused,
+                    reason=sel.reason if k == sel.frontier else f.reason)
+            for k, (f, ls) in enumerate(zip(frontiers, sel.language))]

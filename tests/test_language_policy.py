@@ -23,16 +23,17 @@ def policy():
 def test_confident_language_wins_over_exploration(policy):
     frontiers = [_frontier(0, ("chair",), 1.0), _frontier(1, ("sink", "bathtub", "shower"), 0.0)]
     sel = policy.select(frontiers, None, "toilet", np.random.default_rng(0))
-    assert sel.frontier == 1 and frontiers[1].s_llm > 0.30
+    assert sel.frontier == 1 and sel.language[1].s_llm > 0.30
     assert "language" in sel.reason
-    assert frontiers[1].queries == {"all goals": "This frontier contains shower, bathtub, and sink."}
-    assert sum(frontiers[1].llm_scores.values()) == pytest.approx(1.0, abs=1e-3)
+    assert sel.language[1].queries == {"all goals": "This frontier contains shower, bathtub, and sink."}
+    assert sum(sel.language[1].llm_scores.values()) == pytest.approx(1.0, abs=1e-3)
+    assert all(f.s_llm is None and not f.queries for f in frontiers)  # the policy scores, it does not write
 
 
 def test_language_below_the_bound_defers_to_cost_utility(policy):
     frontiers = [_frontier(0, ("sink", "bathtub", "shower"), 0.2), _frontier(1, ("toilet", "sink"), 0.9)]
     sel = policy.select(frontiers, None, "tv", np.random.default_rng(0))
-    assert max(f.s_llm for f in frontiers) < 0.15
+    assert max(ls.s_llm for ls in sel.language) < 0.15
     assert sel.frontier == 1 and "exploration" in sel.reason
 
 
@@ -41,8 +42,8 @@ def test_in_between_fuses_with_cost_utility_rescaled_into_the_bound(policy):
     frontiers = [_frontier(0, (), 0.1), _frontier(1, ("chair",), 0.8), _frontier(2, (), 0.5)]
     sel = policy.select(frontiers, None, "bed", np.random.default_rng(0))
     assert sel.frontier == 1 and "fused" in sel.reason
-    assert frontiers[1].fused == pytest.approx(0.15 + 0.8 * 0.15)
-    assert frontiers[0].fused == pytest.approx(1 / 6, abs=1e-6)
+    assert sel.language[1].fused == pytest.approx(0.15 + 0.8 * 0.15)
+    assert sel.language[0].fused == pytest.approx(1 / 6, abs=1e-6)
 
 
 def test_official_code_feedforward_falls_back_to_best_utility_below_0_2():
@@ -59,3 +60,22 @@ def test_table_ii_ablations_are_named_policies():
 def test_unknown_selection_is_a_clear_error():
     with pytest.raises(L3MVNError, match="unknown selection 'best'.*paper, official_code"):
         PolicyConfig(selection="best")
+
+
+def test_the_agent_shows_each_frontier_with_the_scores_the_language_policy_gave_it(tiny_scene):
+    from l3mvn.config import Config
+    from l3mvn.runner import Runner
+    from l3mvn.types import Episode, Pose
+
+    runner = Runner(Config().with_frame(60, 80))
+    session = runner.session(tiny_scene, "l3mvn-zs")
+    session.start(Episode(episode_id=0, scene="Tiny", floor=0, start=Pose(2.5, 2.0, 0.0), goal="toilet"))
+    shown = None
+    while not session.done and shown is None:
+        d = session.step().decision
+        if d is not None and d.goal_kind == "frontier" and d.frontiers:
+            shown = d
+    assert shown is not None, "the agent never chose a frontier"
+    assert all(f.s_llm is not None and f.fused is not None and f.llm_scores for f in shown.frontiers)
+    chosen = shown.frontiers[shown.chosen_frontier]
+    assert chosen.reason and shown.reason.endswith(chosen.reason)

@@ -21,7 +21,7 @@ class Frontier:
     ``cells`` are (row, col) map cells; ``center`` is a cell of the cluster; ``distance_m`` is the
     geodesic distance from the agent to the centre; ``utility`` and ``cost`` are the two terms of
     S_CU = utility - lambda * cost and ``s_cu`` is S_CU min-max normalised over the returned frontiers.
-    The language fields stay empty until the global policy scores the frontier.
+    The language fields stay empty until the agent attaches a language policy's scores (``LanguageScore``).
     """
 
     id: int

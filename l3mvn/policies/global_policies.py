@@ -17,12 +17,24 @@ from l3mvn.frontiers import Frontier
 from l3mvn.planning.fmm import distance_field
 
 
+@dataclass(frozen=True)
+class LanguageScore:
+    """What a language policy concluded about one frontier: the sentence asked per goal, the model's
+    p(goal | frontier) for every goal, the target's S_LLM and the fused score the choice used."""
+
+    queries: dict[str, str]
+    llm_scores: dict[str, float]
+    s_llm: float
+    fused: float
+
+
 @dataclass
 class Selection:
     frontier: int | None  # index into the frontier list, or None for a free-standing cell
     cell: tuple[int, int]
     scores: np.ndarray  # one per frontier, in [0, 1]
     reason: str
+    language: tuple[LanguageScore, ...] = ()  # one per frontier (language policies only)
 
 
 class GlobalPolicy(Protocol):

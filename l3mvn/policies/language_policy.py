@@ -20,7 +20,7 @@ import numpy as np
 from l3mvn.config import SELECTIONS
 from l3mvn.errors import L3MVNError
 from l3mvn.frontiers import Frontier
-from l3mvn.policies.global_policies import Selection
+from l3mvn.policies.global_policies import LanguageScore, Selection
 
 BOUND = (0.15, 0.30)
 
@@ -57,19 +57,17 @@ class LanguageFrontierPolicy:
         dists = self.scorer.score(objects)
         s_llm = np.array([d[goal] for d in dists])
         explore = self._exploration(frontiers)
-        for f, d, objs in zip(frontiers, dists, objects):
-            f.queries = self.scorer.queries(objs)
-            f.llm_scores = {g: round(p, 4) for g, p in d.items()}
-            f.s_llm = float(d[goal])
         if self.selection == "official_code":
             i, reason = self._official(frontiers, s_llm, explore)
             fused = s_llm
         else:
             i, reason, fused = self._paper(s_llm, explore)
-        for f, v in zip(frontiers, fused):
-            f.fused = float(v)
-        frontiers[i].reason = reason
-        return Selection(i, frontiers[i].center, np.asarray(fused, dtype=np.float64), reason)
+        language = tuple(
+            LanguageScore(queries=self.scorer.queries(objs), llm_scores={g: round(p, 4) for g, p in d.items()},
+                          s_llm=float(d[goal]), fused=float(v))
+            for objs, d, v in zip(objects, dists, fused)
+        )
+        return Selection(i, frontiers[i].center, np.asarray(fused, dtype=np.float64), reason, language)
 
     def _exploration(self, frontiers: list[Frontier]) -> np.ndarray:
         if self.exploration == "cost-utility":

@@ -1,53 +1,24 @@
-"""Rerun recordings of episodes: a step-event subscriber that writes one ``.rrd`` per episode, plus
-reading, listing and replaying them.
-
-Entity tree (all on the ``step`` sequence timeline)::
-
-    camera/rgb  camera/depth  camera/semantic          what the agent saw
-    map/semantic  map/frontiers  map/frontier_cells    the agent's map (map-based policies only),
-    map/trajectory  map/agent  map/goal  map/short_term_goal   in map-cell pixels (x = col, y = row)
-    world/agent  world/trajectory  world/goal          the same in metres, in 3D
-    metrics/ground_truth  metrics/timings_ms           one named line per value (SeriesLines)
-    metrics/frontiers
-    log/decisions  log/language  log/episode           text logs
-    episode                                            a markdown card: which episode, its result
-
-Class names and colours come from annotation contexts (``camera`` and ``map``) built with
-``l3mvn.viz.category_palette``, so "bed" has one colour in the camera image, the map and the dashboard.
-Each recorder owns its own ``RecordingStream``, so several episodes can be recorded at once.
-"""
+"""The recorder: a step-event subscriber that writes one ``.rrd`` per episode."""
 
 from __future__ import annotations
 
-import argparse
 import logging
 import math
-import os
-import re
-import socket
-import subprocess
-import sys
 import threading
 import time
-import warnings
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
-import rerun.blueprint as rrb
-from rerun.chunk import RrdReader
 
 from l3mvn.errors import L3MVNError
 from l3mvn.events import EventBus, StepEvent
+from l3mvn.recording.catalogue import APPLICATION_ID, TIMELINE, one_line, recording_path
+from l3mvn.recording.layout import default_blueprint
 from l3mvn.types import Episode
 from l3mvn.viz import BACKGROUND_RGB, category_palette
 
 log = logging.getLogger(__name__)
-
-APPLICATION_ID = "l3mvn"
-TIMELINE = "step"
-DEFAULT_WEB_PORT = 9090
 
 # Map classes before the categories, SemExp's visualisation colours (unexplored is white).
 _MAP_CLASSES = (
@@ -60,158 +31,8 @@ _LOW_SCORE_RGB = np.array([220, 50, 50], np.float32)
 _HIGH_SCORE_RGB = np.array([40, 190, 80], np.float32)
 _AGENT_RGB = (30, 120, 255)
 _GOAL_RGB = (255, 0, 200)
-_NAME_PART = re.compile(r"[^A-Za-z0-9.-]+")
 
 
-# --- file names -----------------------------------------------------------------------------
-def recording_path(recordings_dir: str | Path, dataset: str | Path, scene: str, episode_id: int,
-                   policy: str) -> Path:
-    """``<dir>/<dataset>_<scene>_<episode>_<policy>.rrd``; a dataset path contributes its folder name,
-    and anything but letters, digits, '.' and '-' becomes '-' so the name parses back unambiguously."""
-    parts = [_name_part(Path(str(dataset)).name or str(dataset)), _name_part(scene), str(int(episode_id)),
-             _name_part(policy)]
-    return Path(recordings_dir) / ("_".join(parts) + ".rrd")
-
-
-@dataclass(frozen=True)
-class RecordingInfo:
-    """One ``.rrd`` on disk; the episode fields are None when the name does not follow the pattern."""
-
-    path: Path
-    dataset: str | None
-    scene: str | None
-    episode_id: int | None
-    policy: str | None
-    size_bytes: int
-    mtime: float
-
-    def to_dict(self) -> dict:
-        return {"path": str(self.path), "name": self.path.name, "dataset": self.dataset, "scene": self.scene,
-                "episode_id": self.episode_id, "policy": self.policy, "size_bytes": self.size_bytes,
-                "mtime": self.mtime}
-
-
-def parse_recording_name(path: str | Path) -> tuple[str, str, int, str] | None:
-    """(dataset, scene, episode_id, policy) from a name made by ``recording_path``, else None."""
-    p = Path(path)
-    parts = p.stem.split("_") if p.suffix == ".rrd" else []
-    if len(parts) != 4 or not parts[2].isdigit() or not all(parts):
-        return None
-    return parts[0], parts[1], int(parts[2]), parts[3]
-
-
-def list_recordings(recordings_dir: str | Path) -> list[RecordingInfo]:
-    """Every ``*.rrd`` directly in the folder, newest first (an absent folder has none)."""
-    folder = Path(recordings_dir)
-    if not folder.is_dir():
-        return []
-    out = []
-    for path in folder.glob("*.rrd"):
-        try:
-            st = path.stat()
-        except OSError:  # deleted while listing
-            continue
-        parsed = parse_recording_name(path)
-        dataset, scene, episode_id, policy = parsed if parsed else (None, None, None, None)
-        out.append(RecordingInfo(path, dataset, scene, episode_id, policy, st.st_size, st.st_mtime))
-    return sorted(out, key=lambda r: (-r.mtime, r.path.name))
-
-
-def _name_part(text: str) -> str:
-    part = _NAME_PART.sub("-", str(text)).strip("-")
-    if not part:
-        raise L3MVNError(f"cannot name a recording after {text!r}: it needs a letter or digit")
-    return part
-
-
-# --- reading --------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class RecordingSummary:
-    """What a ``.rrd`` holds, read back with rerun's own reader."""
-
-    path: Path
-    application_id: str
-    recording_id: str
-    entity_paths: tuple[str, ...]
-    steps: tuple[int, ...]  # distinct values on the ``step`` timeline, sorted
-
-
-def open_recording(path: str | Path) -> RrdReader:
-    """Rerun's reader for ``path``, or L3MVNError naming the file when it is missing or not a recording.
-
-    A recording still being written (or cut off before its footer) is accepted: rerun falls back to
-    scanning the file.
-    """
-    p = Path(path)
-    if not p.is_file():
-        raise L3MVNError(f"recording {p} not found" + ("" if not p.exists() else " (not a file)"))
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # "no footer": expected for a live or interrupted recording
-            reader = RrdReader(p)
-            recordings = reader.recordings()
-    except (RuntimeError, ValueError, OSError) as exc:
-        raise L3MVNError(f"{p} is not a readable rerun recording: {_one_line(exc)}") from None
-    if not recordings:
-        raise L3MVNError(f"{p} holds no rerun recording (only blueprints)")
-    return reader
-
-
-def read_recording(path: str | Path) -> RecordingSummary:
-    """Entity paths and step numbers of the first recording in ``path`` (reads every chunk)."""
-    reader = open_recording(path)
-    entry = reader.recordings()[0]
-    entities: set[str] = set()
-    steps: set[int] = set()
-    try:
-        for chunk in reader.stream(store=entry):
-            entities.add(chunk.entity_path)
-            if TIMELINE in chunk.timeline_names:
-                steps.update(chunk.to_record_batch().column(TIMELINE).to_pylist())
-    except (RuntimeError, ValueError, OSError) as exc:
-        raise L3MVNError(f"{path} is not a readable rerun recording: {_one_line(exc)}") from None
-    entities.discard("/__properties")
-    return RecordingSummary(Path(path), entry.application_id, entry.recording_id, tuple(sorted(entities)),
-                            tuple(sorted(s for s in steps if s is not None)))
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split())
-
-
-# --- the layout -----------------------------------------------------------------------------
-def default_blueprint() -> rrb.Blueprint:
-    """Cameras and metrics on the left, the map (and 3D world) on the right, logs below."""
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(
-                rrb.Horizontal(
-                    rrb.Spatial2DView(name="RGB", origin="camera/rgb"),
-                    rrb.Spatial2DView(name="Depth", origin="camera/depth"),
-                    rrb.Spatial2DView(name="Semantic", origin="camera/semantic"),
-                ),
-                rrb.Horizontal(
-                    rrb.TimeSeriesView(name="Ground truth", origin="metrics/ground_truth"),
-                    rrb.TimeSeriesView(name="Timings (ms)", origin="metrics/timings_ms"),
-                    rrb.TimeSeriesView(name="Frontiers", origin="metrics/frontiers"),
-                ),
-                rrb.Tabs(
-                    rrb.TextLogView(name="Decisions", origin="log"),
-                    rrb.TextDocumentView(name="Episode", origin="episode"),
-                ),
-                row_shares=[2, 1, 1],
-            ),
-            rrb.Tabs(
-                rrb.Spatial2DView(name="Map", origin="map"),
-                rrb.Spatial3DView(name="World", origin="world"),
-            ),
-            column_shares=[3, 2],
-        ),
-        collapse_panels=True,
-    )
-
-
-# --- the recorder ---------------------------------------------------------------------------
 class Recorder:
     """A StepEvent subscriber writing one episode to ``path`` (see the module docstring for the tree).
 
@@ -228,7 +49,7 @@ class Recorder:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._rec.save(self.path, default_blueprint=default_blueprint())
         except (OSError, RuntimeError, ValueError) as exc:
-            raise L3MVNError(f"cannot write recording {self.path}: {_one_line(exc)}") from None
+            raise L3MVNError(f"cannot write recording {self.path}: {one_line(exc)}") from None
         self._rec.send_recording_name(f"{Path(str(dataset)).name} {scene} #{episode_id} {policy}")
         self._lock = threading.Lock()
         self._closed = False
@@ -545,82 +366,3 @@ def _frontier_label(f, chosen: bool) -> str:
 
 def _fmt(v) -> str:
     return f"{v:.3f}" if isinstance(v, float) else str(v)
-
-
-# --- replay ---------------------------------------------------------------------------------
-def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``l3mvn replay FILE.rrd [--web] [--port N]``."""
-    parser.add_argument("file", help="a .rrd recording (see recordings/)")
-    parser.add_argument("--web", action="store_true",
-                        help="serve rerun's web viewer over HTTP and print its URL instead of opening a window")
-    parser.add_argument("--port", type=int, default=DEFAULT_WEB_PORT,
-                        help=f"HTTP port of the web viewer with --web (default {DEFAULT_WEB_PORT}); its data "
-                             "port is picked free and printed too")
-    parser.add_argument("--host", default="127.0.0.1",
-                        help="interface the web viewer binds with --web (default 127.0.0.1, this machine only)")
-
-
-def run_replay(args: argparse.Namespace) -> int:
-    """Open ``args.file`` in rerun's viewer (native, or web with ``--web``); returns its exit status."""
-    path = Path(args.file)
-    open_recording(path)
-    exe = viewer_executable()
-    if args.web:
-        if not 0 < args.port < 65536:
-            raise L3MVNError(f"--port must lie in 1..65535, got {args.port}")
-        if not _port_free(args.port):
-            raise L3MVNError(f"port {args.port} is in use; pick another with --port")
-        grpc = _free_port()
-        cmd = [exe, "--web-viewer", "--web-viewer-port", str(args.port), "--port", str(grpc),
-               "--bind", args.host, str(path)]
-        if args.host not in ("127.0.0.1", "localhost", "::1"):
-            print(f"warning: serving on {args.host}: anyone who can reach it can read the recording", file=sys.stderr)
-        print(f"serving {path} at {web_viewer_url(args.port, grpc)} (HTTP port {args.port}, data port {grpc}; "
-              "Ctrl-C to stop)", flush=True)
-    else:
-        if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-            raise L3MVNError("no display for the native viewer (DISPLAY is unset); use --web to serve it in a browser")
-        cmd = [exe, str(path)]
-    try:
-        return subprocess.call(cmd)
-    except KeyboardInterrupt:
-        return 0
-
-
-def viewer_executable() -> str:
-    """The ``rerun`` viewer binary shipped with rerun-sdk (``rerun_cli``), else one on PATH."""
-    try:
-        import rerun_cli
-
-        bundled = Path(rerun_cli.__file__).parent / ("rerun.exe" if sys.platform.startswith("win") else "rerun")
-        if bundled.is_file():
-            return str(bundled)
-    except ImportError:
-        pass
-    import shutil
-
-    found = shutil.which("rerun")
-    if not found:
-        raise L3MVNError("the rerun viewer binary was not found; reinstall rerun-sdk (pip install rerun-sdk)")
-    return found
-
-
-def web_viewer_url(web_port: int, grpc_port: int, host: str = "127.0.0.1") -> str:
-    from urllib.parse import quote
-
-    return f"http://{host}:{web_port}/?url={quote(f'rerun+http://{host}:{grpc_port}/proxy', safe='')}"
-
-
-def _port_free(port: int) -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        try:
-            s.bind(("0.0.0.0", port))
-        except OSError:
-            return False
-    return True
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
