@@ -11,6 +11,7 @@ once beforehand (a cluster outlives runs), its actors per run.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import os
 import sys
@@ -20,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from l3mvn.config import Config
+from l3mvn.errors import L3MVNError
 from l3mvn.eval.backends import run_local
 from l3mvn.eval.job import EvalJob, is_error_row
 
@@ -152,17 +154,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.max_steps:
         config = config.replace(sim=dataclasses.replace(config.sim, max_steps=args.max_steps))
     backends = [b.strip() for b in args.backends.split(",") if b.strip()]
-    if "ray" in backends:
-        try:
-            import ray
-        except ImportError:
-            print("ray is not installed: benchmarking local processes only", file=sys.stderr)
-            backends.remove("ray")
-        else:
-            ray.init(num_cpus=max(args.workers), _node_ip_address="127.0.0.1", include_dashboard=False,
-                     log_to_driver=False, logging_level="ERROR")
     runs: list[Run] = []
-    try:
+    with contextlib.ExitStack() as stack:
+        if "ray" in backends:
+            try:
+                from l3mvn.eval.ray_backend import private_ray
+
+                stack.enter_context(private_ray(max(args.workers)))
+            except L3MVNError as exc:
+                print(f"{exc}: benchmarking local processes only", file=sys.stderr)
+                backends.remove("ray")
         for policy in args.policy or ["oracle"]:
             job = EvalJob.create(args.dataset, args.split, houses=args.houses,
                                  episodes_per_house=args.episodes_per_house, seed=args.seed, config=config,
@@ -172,11 +173,6 @@ def main(argv: list[str] | None = None) -> int:
                 for n in args.workers:
                     runs.append(measure(job, keys, backend, n))
                     print(f"{policy} {backend} x{n}: {runs[-1].wall_s:.1f} s", file=sys.stderr)
-    finally:
-        if "ray" in backends:
-            import ray
-
-            ray.shutdown()
     source = args.dataset or f"procedural {args.houses} houses x {args.episodes_per_house}"
     title = f"{source}, {h}x{w}, {os.cpu_count()} CPUs"
     print(f"## Throughput: {title}\n")
