@@ -18,7 +18,7 @@ import numpy as np
 
 from l3mvn.config import Config
 from l3mvn.errors import L3MVNError
-from l3mvn.events import Decision
+from l3mvn.events import EXPLORING, Decision, GoalKind
 from l3mvn.frontiers import Frontier, extract_frontiers
 from l3mvn.looking import distance_to, far_sighting, look_goal, mask_centre, pick_viewpoint, turn_towards, unknown_near
 from l3mvn.mapping import SemanticMap, SemanticMapper
@@ -29,7 +29,6 @@ from l3mvn.policies.global_policies import GlobalPolicy, Selection
 from l3mvn.types import Action, Episode, Observation, Pose
 
 
-_EXPLORING = ("frontier", "random", "explore", "look")
 
 
 class MapAgent:
@@ -62,7 +61,7 @@ class MapAgent:
         self._steps = 0
         self._since_select = math.inf
         self._ltg: tuple[int, int] | None = None
-        self._ltg_kind = ""
+        self._ltg_kind = GoalKind.NONE
         self._ltg_frontier: int | None = None
         self._ltg_reason = ""
         self._manual: tuple[int, int] | None = None
@@ -128,23 +127,23 @@ class MapAgent:
         override = None
         frontiers_ms = policy_ms = 0.0
         if self._manual is not None:
-            goal, kind, reason = self._manual, "manual", f"manual goal {self._manual} set in the dashboard"
+            goal, kind, reason = self._manual, GoalKind.MANUAL, f"manual goal {self._manual} set in the dashboard"
             override = f"manual:{self._manual[0]},{self._manual[1]}"
         elif target is not None and confirmed:
-            goal, kind, reason = target, "target", f"{self.goal} seen: heading to it"
+            goal, kind, reason = target, GoalKind.TARGET, f"{self.goal} seen: heading to it"
         elif target is not None and self._viewpoint is not None:
-            goal, kind = self._viewpoint, "viewpoint"
+            goal, kind = self._viewpoint, GoalKind.VIEWPOINT
             reason = (f"{int(target.sum())} {self.goal} cell(s) seen, still too few up close: looking from "
                       f"another side ({len(self._views)} of {self.cfg.candidate_views})")
         elif target is not None:
-            goal, kind = target, "candidate"
+            goal, kind = target, GoalKind.CANDIDATE
             reason = f"{int(target.sum())} {self.goal} cell(s) seen: too few to stop, going closer to confirm"
         elif self._steps < self.cfg.look_around_steps:
             self._steps += 1
-            return self._decide(obs, Action.TURN_LEFT, sem_map, None, "look-around",
+            return self._decide(obs, Action.TURN_LEFT, sem_map, None, GoalKind.LOOK_AROUND,
                                 "initial 360-degree look", t, None, None)
         elif self._glimpse is not None:
-            goal, kind = self._glimpse, "glimpse"
+            goal, kind = self._glimpse, GoalKind.GLIMPSE
             reason = f"{self.goal} seen beyond the depth range: walking towards it"
         else:
             if self._reselect_due():
@@ -153,7 +152,7 @@ class MapAgent:
         t["select"] = time.perf_counter()
 
         plan = self._plan(sem_map, goal, kind, last_move)
-        if kind == "glimpse" and (plan.reached or not plan.reachable or self._stalled(goal, plan)):
+        if kind == GoalKind.GLIMPSE and (plan.reached or not plan.reachable or self._stalled(goal, plan)):
             # There, and the target still maps to nothing (or no way there): explore on.
             self._blocked.append(goal)
             self._glimpse = None
@@ -161,10 +160,10 @@ class MapAgent:
             frontiers_ms, policy_ms = frontiers_ms + more_f, policy_ms + more_p
             goal, kind, reason = self._ltg, self._ltg_kind, self._ltg_reason
             plan = self._plan(sem_map, goal, kind, None)
-        if kind in _EXPLORING and plan.reached:
+        if kind in EXPLORING and plan.reached:
             plan, reason = self._finish_looking(sem_map, goal, kind, plan, reason, last_move)
         retries = 0
-        while kind in _EXPLORING and (plan.reached or not plan.reachable or self._stalled(goal, plan)) \
+        while kind in EXPLORING and (plan.reached or not plan.reachable or self._stalled(goal, plan)) \
                 and retries < self.cfg.max_reselect:
             # Reached (or found unreachable, or no nearer for a while) an exploration goal: never come
             # back to it, and pick the next one now rather than spending this step on a goal that is done.
@@ -176,16 +175,16 @@ class MapAgent:
             goal, kind, reason = self._ltg, self._ltg_kind, self._ltg_reason
             plan = self._plan(sem_map, goal, kind, None)
             retries += 1
-        if kind == "viewpoint" and (plan.reached or not plan.reachable or self._stalled(goal, plan)):
+        if kind == GoalKind.VIEWPOINT and (plan.reached or not plan.reachable or self._stalled(goal, plan)):
             # At the other pose (or it cannot be reached): face the sighting, then approach it again.
             turn = self._turn_towards(sem_map, mask_centre(target))
             if turn is None or not plan.reachable:
                 self._viewpoint = None
-                goal, kind = target, "candidate"
+                goal, kind = target, GoalKind.CANDIDATE
                 plan = self._plan(sem_map, goal, kind, None)
             else:
                 plan = replace(plan, action=turn, reached=False)
-        elif kind == "candidate" and plan.reached:
+        elif kind == GoalKind.CANDIDATE and plan.reached:
             turn = self._turn_towards(sem_map, mask_centre(target))
             if turn is not None:
                 plan = replace(plan, action=turn, reached=False)
@@ -193,41 +192,41 @@ class MapAgent:
             elif len(self._views) < self.cfg.candidate_views \
                     and (view := self._pick_viewpoint(sem_map, target)) is not None:
                 self._viewpoint = view
-                goal, kind = view, "viewpoint"
+                goal, kind = view, GoalKind.VIEWPOINT
                 reason = f"{int(target.sum())} {self.goal} cell(s) still too few up close: looking from another side"
                 plan = self._plan(sem_map, goal, kind, None)
         t["planning"] = time.perf_counter()
         self.stuck = plan.stuck
         action = plan.action
         self._unreachable = 0 if plan.reachable else self._unreachable + 1
-        if plan.reached and kind == "target":
+        if plan.reached and kind == GoalKind.TARGET:
             action, reason = Action.STOP, f"{self.goal} {_straight_m(sem_map, goal):.2f} m away: stop"
-        elif kind == "target" and (not plan.reachable or plan.stuck) \
+        elif kind == GoalKind.TARGET and (not plan.reachable or plan.stuck) \
                 and (near := _straight_m(sem_map, goal)) <= self.cfg.blocked_stop_distance_m:
             # Seen over a counter or through a gap the map closes, or the floor ends short of it
             # (Hiteman: pushed 380 steps along the navmesh edge 0.90 m from a toilet): as near as
             # the free space allows.
             action, reason = Action.STOP, f"{self.goal} {near:.2f} m away (no path closer): stop"
-        elif kind in ("candidate", "target") and self._unreachable >= self.cfg.escape_after_unreachable and (
-            kind == "candidate" or self._target_escapes >= self.cfg.target_escapes
+        elif kind in (GoalKind.CANDIDATE, GoalKind.TARGET) and self._unreachable >= self.cfg.escape_after_unreachable and (
+            kind == GoalKind.CANDIDATE or self._target_escapes >= self.cfg.target_escapes
         ):
             self._rejected |= goal
             self._unreachable, self._target_escapes, self._since_select = 0, 0, math.inf
             self._viewpoint, self._views = None, []
             reason = f"{self.goal} cells unreachable: set aside, exploring on"
         elif self._unreachable >= self.cfg.escape_after_unreachable or plan.stuck:
-            if kind == "target" and not plan.reachable:
+            if kind == GoalKind.TARGET and not plan.reachable:
                 self._target_escapes += 1
-            if kind in _EXPLORING:
+            if kind in EXPLORING:
                 self._blocked.append(self._ltg)
             self._start_escape()
             action, reason = self._escape.pop(), "goal unreachable or stuck: clearing collision marks, escaping"
-        elif plan.reached and kind == "candidate":
+        elif plan.reached and kind == GoalKind.CANDIDATE:
             # Seen up close, faced and from other sides, and it never grew into a target: mapping noise.
             self._rejected |= target
             reason = f"{self.goal} cells never grew into a target from {len(self._views) + 1} views: set aside"
             self._since_select, self._views = math.inf, []
-        elif plan.reached and kind == "manual":
+        elif plan.reached and kind == GoalKind.MANUAL:
             self._manual = None
             self._since_select = math.inf
         self._since_select += 1
@@ -242,8 +241,8 @@ class MapAgent:
         its goal (random sample) still pursues one or while walking up to a frontier."""
         if self._ltg is None or self._since_select == math.inf:
             return True
-        keeps = self._ltg_kind == "random" and getattr(self.global_policy, "keeps_goal", False)
-        keeps = keeps or (self._ltg_kind == "frontier" and self._ltg == self._pressing)  # nearly there
+        keeps = self._ltg_kind == GoalKind.RANDOM and getattr(self.global_policy, "keeps_goal", False)
+        keeps = keeps or (self._ltg_kind == GoalKind.FRONTIER and self._ltg == self._pressing)  # nearly there
         return self._since_select >= self.cfg.replan_every and not keeps
 
     def _reselect(self, sem_map: SemanticMap) -> tuple[float, float]:
@@ -253,7 +252,7 @@ class MapAgent:
         self._frontiers = self._extract(sem_map)
         if not self._frontiers and (look := self._look_goal(sem_map)) is not None:
             self._since_select = 0
-            self._ltg, self._ltg_kind, self._ltg_frontier = look, "look", None
+            self._ltg, self._ltg_kind, self._ltg_frontier = look, GoalKind.LOOK, None
             self._ltg_reason = "no frontier left: looking at floor seen only from afar"
             return (time.perf_counter() - t0) * 1e3, 0.0
         if not self._frontiers and self._blocked:
@@ -275,18 +274,18 @@ class MapAgent:
         return since + 1 >= self.cfg.goal_patience_steps
 
     def _plan(self, sem_map: SemanticMap, goal, kind: str, last_move: float | None):
-        if kind == "target" and self.config.task.success_rule == "semexp":
+        if kind == GoalKind.TARGET and self.config.task.success_rule == "semexp":
             # That rule measures straight-line distance, through walls: head for the nearest cell
             # within stop distance of the target, which may be the far side of its room's wall
             # (Pinesdale: a TV seen through a doorway sent the agent round the house's outside).
             goal, radius, dilation = _within(goal, self.cfg.stop_distance_m / sem_map.resolution_m), 0.0, 0.0
-        elif kind == "target":
+        elif kind == GoalKind.TARGET:
             radius, dilation = self.cfg.stop_distance_m, None
-        elif kind == "candidate":
+        elif kind == GoalKind.CANDIDATE:
             radius, dilation = self.cfg.candidate_reached_m, None
         else:
             radius, dilation = self.cfg.frontier_reached_m, self.cfg.explore_goal_dilation_m
-            if kind == "frontier" and goal == self._pressing:
+            if kind == GoalKind.FRONTIER and goal == self._pressing:
                 radius = self.cfg.frontier_press_m
         return self.planner.plan(sem_map.obstacle, sem_map.agent_cell, sem_map.agent_heading, goal,
                                  last_move_m=last_move, goal_reached_radius_m=radius,
@@ -304,7 +303,7 @@ class MapAgent:
         turn = self._turn_towards(sem_map, goal if beyond is None else beyond)
         if turn is not None:
             return replace(plan, action=turn, reached=False), f"{reason}; turning to look at it"
-        if kind == "frontier" and beyond is not None and self._pressing != goal:
+        if kind == GoalKind.FRONTIER and beyond is not None and self._pressing != goal:
             self._pressing = goal
             pressed = self._plan(sem_map, goal, kind, last_move)
             if pressed.reachable and not pressed.reached:
@@ -412,12 +411,12 @@ class MapAgent:
             free = np.argwhere(~win.obstacle & ~win.explored) if (~win.explored).any() else np.argwhere(~win.obstacle)
             r, c = free[self.rng.integers(len(free))]
             self._ltg = (int(r) + win.bounds[0], int(c) + win.bounds[2])
-            self._ltg_kind, self._ltg_frontier = "explore", None
+            self._ltg_kind, self._ltg_frontier = GoalKind.EXPLORE, None
             self._ltg_reason = "no frontier: exploring a random free cell"
             return
         sel = self._commit(sel)
         self._ltg, self._ltg_frontier = sel.cell, sel.frontier
-        self._ltg_kind = "frontier" if sel.frontier is not None else "random"
+        self._ltg_kind = GoalKind.FRONTIER if sel.frontier is not None else GoalKind.RANDOM
         self._ltg_reason = sel.reason
 
     def _commit(self, sel: Selection) -> Selection:
@@ -446,8 +445,8 @@ class MapAgent:
         timings.update(extra_ms or {})
         return Decision(
             action=action, reason=reason, map=sem_map, frontiers=self._frontiers, long_term_goal=ltg,
-            goal_kind=kind, chosen_frontier=self._ltg_frontier if kind == "frontier" else None,
-            short_term_goal=stg, override=override, target_seen=kind == "target", stuck=self.stuck,
+            goal_kind=kind, chosen_frontier=self._ltg_frontier if kind == GoalKind.FRONTIER else None,
+            short_term_goal=stg, override=override, target_seen=kind == GoalKind.TARGET, stuck=self.stuck,
             timings_ms=timings,
         )
 

@@ -7,6 +7,8 @@ that event, never allowed to break the episode.
 
 from __future__ import annotations
 
+import enum
+
 import logging
 import threading
 from dataclasses import dataclass, field
@@ -15,6 +17,26 @@ from typing import Any, Callable
 from l3mvn.types import Action, Observation, Pose
 
 log = logging.getLogger(__name__)
+
+
+class GoalKind(enum.StrEnum):
+    """What the agent's long-term goal is; a ``str`` so event consumers can compare with plain names."""
+
+    NONE = ""
+    TARGET = "target"  # the target, confirmed on the map: walk to it and stop
+    CANDIDATE = "candidate"  # goal cells too few to confirm: approach and look again
+    VIEWPOINT = "viewpoint"  # another pose to look at a candidate from
+    GLIMPSE = "glimpse"  # the target seen beyond the depth range: walk towards it
+    FRONTIER = "frontier"  # a frontier chosen by the global policy
+    RANDOM = "random"  # a free cell the global policy sampled
+    EXPLORE = "explore"  # no frontier left: a random free cell
+    LOOK = "look"  # an area only seen from afar: go and look
+    MANUAL = "manual"  # a cell picked in the dashboard
+    LOOK_AROUND = "look-around"  # the initial turn in place
+
+
+# Goals that explore rather than approach what was seen.
+EXPLORING = frozenset({GoalKind.FRONTIER, GoalKind.RANDOM, GoalKind.EXPLORE, GoalKind.LOOK})
 
 
 @dataclass
@@ -26,7 +48,7 @@ class Decision:
     map: Any = None  # l3mvn.mapping.SemanticMap (live view: copy to keep)
     frontiers: list = field(default_factory=list)  # list[l3mvn.frontiers.Frontier]
     long_term_goal: tuple[int, int] | None = None
-    goal_kind: str = ""  # "frontier", "target", "random", "manual", "look-around"
+    goal_kind: GoalKind = GoalKind.NONE
     chosen_frontier: int | None = None
     short_term_goal: tuple[int, int] | None = None
     override: str | None = None

@@ -5,6 +5,8 @@ from ``+x``, so heading ``h`` points along ``(drow, dcol) = (sin h, cos h)`` and
 it. Unknown cells count as free (optimistic planning, as SemExp); obstacles are dilated by the
 agent radius; cells where a forward step failed are blocked in a collision map.
 
+Collision marks and the stuck signal live in ``collisions.py``.
+
 Speed: a fresh FMM costs 5-40 ms on a house-sized window, so the field to the goal is kept across
 steps while it provably still gives the agent's shortest path and short-term goal: same goal, no
 cell freed, and no newly blocked cell on either path (see ``_reusable``); about one step in ten
@@ -16,7 +18,6 @@ The planner never stops by itself: whether the goal is the target object is the 
 
 from __future__ import annotations
 
-import collections
 import math
 from dataclasses import dataclass
 
@@ -25,6 +26,7 @@ import numpy as np
 
 from l3mvn.config import PlannerConfig
 from l3mvn.errors import L3MVNError
+from l3mvn.planning.collisions import CollisionTracker
 from l3mvn.planning.fmm import GeodesicField, Window, distance_field
 from l3mvn.types import Action
 
@@ -95,27 +97,19 @@ class LocalPlanner:
 
     def reset(self) -> None:
         """Forget the collision map, the cached field and the stuck history (new episode)."""
-        self._collision: np.ndarray | None = None
+        self._collisions = CollisionTracker(self.cfg, self.resolution_m)
         self._cache: _GoalField | None = None
-        self._consecutive_collisions = 0
-        window = self.cfg.stuck_window_steps
-        self._recent_collisions: collections.deque[bool] = collections.deque(maxlen=window)
-        self._recent_cells: collections.deque[tuple[int, int]] = collections.deque(maxlen=window)
         self.fmm_runs = 0
 
     def clear_collisions(self) -> None:
         """Forget the collision marks and the stuck history (an agent escaping a trap it marked)."""
-        if self._collision is not None:
-            self._collision.fill(False)
+        self._collisions.clear()
         self._cache = None
-        self._consecutive_collisions = 0
-        self._recent_collisions.clear()
-        self._recent_cells.clear()
 
     @property
     def collision_map(self) -> np.ndarray | None:
         """(M, M) bool cells blocked by failed forward steps (None before the first plan)."""
-        return self._collision
+        return self._collisions.map
 
     def plan(
         self,
@@ -147,7 +141,7 @@ class LocalPlanner:
             raise L3MVNError(f"goal_reached_radius_m must be >= 0, got {goal_reached_radius_m}")
         goal_rows, goal_cols = _goal_cells(goal, obstacle.shape)
         dilation = self._dilation_cells(goal_dilation_m)
-        collided = self._record_motion(agent, heading, last_move_m)
+        collided = self._collisions.record(agent, heading, last_move_m)
 
         key = (goal_rows.tobytes(), goal_cols.tobytes(), dilation)
         nearest_goal = _nearest(agent, goal_rows, goal_cols)
@@ -182,7 +176,7 @@ class LocalPlanner:
             reachable=reachable,
             reached=reachable and distance <= goal_reached_radius_m,
             collided=collided,
-            stuck=self._stuck(agent),
+            stuck=self._collisions.stuck(agent),
             replanned=replanned,
             field=field,
         )
@@ -239,12 +233,7 @@ class LocalPlanner:
         obstacle = np.asarray(obstacle)
         if obstacle.ndim != 2 or obstacle.dtype != bool:
             raise L3MVNError(f"obstacle map must be a 2D bool array, got {obstacle.dtype} {obstacle.shape}")
-        if self._collision is None:
-            self._collision = np.zeros(obstacle.shape, dtype=bool)
-        elif self._collision.shape != obstacle.shape:
-            raise L3MVNError(
-                f"map shape changed from {self._collision.shape} to {obstacle.shape}; call reset() first"
-            )
+        self._collisions.start(obstacle.shape)
         return obstacle
 
     def _traversible(self, obstacle: np.ndarray, window: Window) -> np.ndarray:
@@ -253,7 +242,7 @@ class LocalPlanner:
         crop = obstacle[pad.slices].view(np.uint8)
         dilated = cv2.dilate(crop, self._obstacle_kernel) if self._obstacle_kernel.size > 1 else crop
         inner = dilated[window.r0 - pad.r0 : window.r1 - pad.r0, window.c0 - pad.c0 : window.c1 - pad.c0]
-        return (inner == 0) & ~self._collision[window.slices]
+        return (inner == 0) & ~self._collisions.map[window.slices]
 
     def _with_escape(
         self, trav: np.ndarray, obstacle: np.ndarray, window: Window, agent: tuple[int, int]
@@ -263,7 +252,7 @@ class LocalPlanner:
         cols = self._escape_offsets[:, 1] + agent[1]
         ok = window.inside(rows, cols)
         rows, cols = rows[ok], cols[ok]
-        free = ~obstacle[rows, cols] & ~self._collision[rows, cols]
+        free = ~obstacle[rows, cols] & ~self._collisions.map[rows, cols]
         out = trav.copy()
         out[rows[free] - window.r0, cols[free] - window.c0] = True
         out[agent[0] - window.r0, agent[1] - window.c0] = True
@@ -278,7 +267,7 @@ class LocalPlanner:
         Then the outside is free, and clamping any path to the window never lengthens it.
         """
         grow = self.cfg.obstacle_dilation_cells + 1
-        for extent in (_extent(obstacle), _extent(self._collision)):
+        for extent in (_extent(obstacle), _extent(self._collisions.map)):
             if extent is None:
                 continue
             rmin, rmax, cmin, cmax = extent
@@ -342,7 +331,7 @@ class LocalPlanner:
     def _whole_window(self, obstacle: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> Window:
         """The window around the given cells and every obstacle and collision mark: exact."""
         rows, cols = [rows], [cols]
-        for extent in (_extent(obstacle), _extent(self._collision)):
+        for extent in (_extent(obstacle), _extent(self._collisions.map)):
             if extent is not None:
                 rows.append(np.array(extent[:2]))
                 cols.append(np.array(extent[2:]))
@@ -476,50 +465,6 @@ class LocalPlanner:
         if error < -threshold:
             return Action.TURN_RIGHT
         return Action.MOVE_FORWARD
-
-    def _record_motion(self, agent: tuple[int, int], heading: float, last_move_m: float | None) -> bool:
-        """Mark the cells ahead as blocked when a forward step moved less than the threshold."""
-        cfg = self.cfg
-        collided = False
-        if last_move_m is not None:
-            if not math.isfinite(last_move_m) or last_move_m < 0:
-                raise L3MVNError(f"last_move_m must be a finite distance >= 0 or None, got {last_move_m}")
-            collided = last_move_m < cfg.collision_threshold_m
-            self._consecutive_collisions = self._consecutive_collisions + 1 if collided else 0
-        if collided:
-            width = min(
-                cfg.collision_mark_width_cells + 2 * (self._consecutive_collisions - 1),
-                cfg.collision_mark_max_width_cells,
-            )
-            ahead = np.arange(
-                cfg.collision_mark_offset_cells,
-                cfg.collision_mark_offset_cells + cfg.collision_mark_length_cells - 0.5 + 1e-9,
-                0.5,
-            )
-            half = (width - 1) / 2
-            side = np.arange(-half, half + 1e-9, 0.5)
-            a, s = np.meshgrid(ahead, side, indexing="ij")
-            sin_h, cos_h = math.sin(heading), math.cos(heading)
-            rows = np.rint(agent[0] + a * sin_h + s * cos_h).astype(np.int64).ravel()
-            cols = np.rint(agent[1] + a * cos_h - s * sin_h).astype(np.int64).ravel()
-            shape = self._collision.shape
-            ok = (rows >= 0) & (rows < shape[0]) & (cols >= 0) & (cols < shape[1])
-            ok &= (rows != agent[0]) | (cols != agent[1])
-            self._collision[rows[ok], cols[ok]] = True
-        self._recent_collisions.append(collided)
-        return collided
-
-    def _stuck(self, agent: tuple[int, int]) -> bool:
-        cfg = self.cfg
-        self._recent_cells.append(agent)
-        if sum(self._recent_collisions) >= cfg.stuck_collisions:
-            return True
-        if len(self._recent_cells) < cfg.stuck_window_steps:
-            return False
-        cells = np.asarray(self._recent_cells)
-        spread = np.hypot(cells[:, 0] - agent[0], cells[:, 1] - agent[1]).max() * self.resolution_m
-        return bool(spread < cfg.stuck_min_displacement_m)
-
 
 def _slack(distance_m: float) -> float:
     return _SLACK_M + _SLACK_REL * distance_m
