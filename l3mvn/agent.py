@@ -265,9 +265,9 @@ class MapAgent:
         return (t1 - t0) * 1e3, (time.perf_counter() - t1) * 1e3
 
     def _stalled(self, goal: tuple[int, int], plan) -> bool:
-        """True once ``goal`` has gone ``goal_patience_steps`` steps without coming 0.5 m closer."""
+        """True once ``goal`` has gone ``goal_patience_steps`` steps without coming ``goal_progress_m`` closer."""
         last_goal, best, since = self._progress
-        if goal != last_goal or plan.distance_to_goal_m < best - 0.5:
+        if goal != last_goal or plan.distance_to_goal_m < best - self.cfg.goal_progress_m:
             self._progress = (goal, plan.distance_to_goal_m, 0)
             return False
         self._progress = (goal, best, since + 1)
@@ -427,7 +427,7 @@ class MapAgent:
         centres = np.array([f.center for f in self._frontiers])
         d = np.hypot(*(centres - np.array(self._ltg)).T)
         j = int(np.argmin(d))
-        if j == sel.frontier or d[j] > 20:  # same frontier, or the old one is gone (> 1 m away)
+        if j == sel.frontier or d[j] > self.cfg.commitment_radius_m / self.config.map.resolution_m:  # or it is gone
             return sel
         if sel.scores[sel.frontier] - sel.scores[j] < self.cfg.commitment_margin:
             f = self._frontiers[j]

@@ -59,8 +59,9 @@ def make_policy(name: str, env: BuiltinSimulator, task: ObjectNavTask, config: C
         return RandomWalkPolicy(seed)
     if name in LANGUAGE_POLICIES:
         scorer, exploration, paradigm = LANGUAGE_POLICIES[name]
-        global_policy = LanguageFrontierPolicy(name, config.policy.scorer or scorer, exploration,
-                                               config.policy.selection, paradigm)
+        p = config.policy
+        global_policy = LanguageFrontierPolicy(name, p.scorer or scorer, exploration, p.selection, paradigm,
+                                               (p.bound_low, p.bound_high))
     elif name == "oracle-frontier":
         global_policy = FrontierOracle(task)
     else:

@@ -27,6 +27,9 @@ class AgentConfig:
     target_escapes: int = 2  # escapes tried for an unreachable target before it is set aside
     frontier_reached_m: float = 0.75  # >= the 0.5 m minimum frontier distance (no dead zone)
     commitment_margin: float = 0.15  # keep the current frontier unless another scores this much higher
+    # ... and the current frontier is the new list's frontier nearest to it within this distance
+    # (farther: it is gone, and the new choice stands).
+    commitment_radius_m: float = 1.0
     # Escape: after this many steps with the goal unreachable (usually walled in by its own
     # collision marks) or a stuck signal, clear the marks and wiggle out with random turns.
     escape_after_unreachable: int = 3
@@ -37,10 +40,11 @@ class AgentConfig:
     # A reached or unreachable exploration goal blocks frontiers whose centre lies this close to it.
     blocked_radius_m: float = 1.0
     max_reselect: int = 3  # exploration goals tried within one step before walking on
-    # An exploration goal the agent has not come 0.5 m closer to in this many steps is given up like
+    # An exploration goal the agent has not come goal_progress_m closer to in this many steps is given up like
     # an unreachable one: a path through unknown space that keeps meeting new walls stays "reachable"
     # while the agent circles (random-sample kept such goals for 480 steps on the dev houses).
     goal_patience_steps: int = 40
+    goal_progress_m: float = 0.5  # ... "closer" means by at least this much
     # Reaching a goal is not seeing it: an exploration goal or a glimpsed target counts as looked at
     # only once it lies within this angle of the view's centre (the 79-degree view's half is 39.5).
     # Gibson toilets were missed this way: the frontier at a bathroom door read as reached from
@@ -65,6 +69,8 @@ class AgentConfig:
     def __post_init__(self) -> None:
         if self.replan_every < 1 or self.target_min_cells < 1 or self.goal_patience_steps < 1:
             raise L3MVNError("replan_every, target_min_cells and goal_patience_steps must be >= 1")
+        if not (self.commitment_radius_m > 0 and self.goal_progress_m > 0):
+            raise L3MVNError("commitment_radius_m and goal_progress_m must be positive")
         if not 0 < self.stop_distance_m <= self.blocked_stop_distance_m:
             raise L3MVNError("stop distances must satisfy 0 < stop_distance_m <= blocked_stop_distance_m")
         if not 0 < self.look_tolerance_deg < 90.0:

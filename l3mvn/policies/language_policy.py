@@ -1,9 +1,10 @@
 """L3MVN's global policy: fuse a language model's frontier score S_LLM with an exploration score.
 
-Paper rule (bound B = [0.15, 0.30]): if max S_LLM > sup B take argmax S_LLM; if it is below inf B take
-argmax of the exploration score; in between, S_CU is rescaled into B (inf B + S_CU * (sup B - inf B))
-and each frontier's fused score is max(S_LLM, rescaled S_CU): a frontier wins on language only where
-the model is more confident about it than exploration is about the best alternative.
+Paper rule (bound B = [PolicyConfig.bound_low, bound_high], [0.15, 0.30] in the paper): if max S_LLM >
+sup B take argmax S_LLM; if it is below inf B take argmax of the exploration score; in between, S_CU
+is rescaled into B (inf B + S_CU * (sup B - inf B)) and each frontier's fused score is
+max(S_LLM, rescaled S_CU): a frontier wins on language only where the model is more confident about
+it than exploration is about the best alternative.
 
 ``selection="official_code"`` reproduces the authors' code instead: feed-forward takes argmax S_LLM if
 its max > 0.2, else the best-utility frontier; zero-shot takes argmax if max > 0.3, else the first
@@ -17,12 +18,11 @@ from functools import lru_cache
 
 import numpy as np
 
-from l3mvn.config import SELECTIONS
+from l3mvn.config import SELECTIONS, PolicyConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.frontiers import Frontier
 from l3mvn.policies.global_policies import LanguageScore, Selection
 
-BOUND = (0.15, 0.30)
 
 
 @lru_cache(maxsize=4)
@@ -38,13 +38,15 @@ class LanguageFrontierPolicy:
     """Scores every frontier's objects with a language scorer and fuses with an exploration score."""
 
     def __init__(self, name: str, scorer: str, exploration: str = "cost-utility", selection: str = "paper",
-                 paradigm: str = "feedforward") -> None:
+                 paradigm: str = "feedforward",
+                 bound: tuple[float, float] = (PolicyConfig.bound_low, PolicyConfig.bound_high)) -> None:
         if selection not in SELECTIONS:
             raise L3MVNError(f"unknown selection {selection!r}; valid: {', '.join(SELECTIONS)}")
         if exploration not in ("cost-utility", "nearest"):
             raise L3MVNError(f"unknown exploration score {exploration!r}; valid: cost-utility, nearest")
         self.name, self.scorer_name = name, scorer
         self.exploration, self.selection, self.paradigm = exploration, selection, paradigm
+        self.bound = bound
         self.scorer = shared_scorer(scorer)
 
     def set_scorer(self, scorer: str) -> None:
@@ -76,7 +78,7 @@ class LanguageFrontierPolicy:
         return 1.0 - d / max(d.max(), 1e-9) if len(d) > 1 else np.ones(1)
 
     def _paper(self, s_llm: np.ndarray, explore: np.ndarray) -> tuple[int, str, np.ndarray]:
-        lo, hi = BOUND
+        lo, hi = self.bound
         top = float(s_llm.max())
         if top > hi:
             i = int(np.argmax(s_llm))
