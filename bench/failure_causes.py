@@ -18,7 +18,23 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from l3mvn.errors import L3MVNError  # noqa: E402
+from l3mvn.eval.results import row_problem  # noqa: E402
 from l3mvn.task.failures import CLASSES, failure_table  # noqa: E402
+
+
+def usable_rows(path: Path) -> tuple[list[dict], int]:
+    """The finished-episode rows of a result file, and how many lines were not (torn, error, invalid)."""
+    rows, unusable = [], 0
+    for line in path.read_text(errors="replace").splitlines():
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            row = None
+        if isinstance(row, dict) and "error" not in row and row_problem(row) is None:
+            rows.append(row)
+        elif line.strip():
+            unusable += 1
+    return rows, unusable
 
 
 def main() -> int:
@@ -33,8 +49,9 @@ def main() -> int:
     audits = {e["key"]: e for e in report["episodes"]}
     columns = []
     for path in args.results:
-        rows = [r for line in Path(path).read_text().splitlines() if line.strip()
-                if "error" not in (r := json.loads(line))]
+        rows, unusable = usable_rows(Path(path))
+        if unusable:
+            print(f"{path}: skipped {unusable} line(s) that are not finished-episode rows", file=sys.stderr)
         try:
             table = failure_table(rows, audits)
         except L3MVNError as exc:

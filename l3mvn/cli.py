@@ -294,12 +294,15 @@ def _cmd_generate(args: argparse.Namespace) -> int:
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
+    """Run the episodes still to do, appending each row to ``--out`` as it finishes, then print the
+    summary of this run's valid rows (``--resume``: the file's too). ``--out`` is locked for the whole
+    run, its torn tail set aside first, and a row that fails ``row_problem`` is never summarised."""
     from contextlib import closing
 
     from l3mvn.eval.backends import run_local
     from l3mvn.eval.job import EvalJob, is_error_row
     from l3mvn.eval.metrics import format_summary, summarize
-    from l3mvn.eval.results import ResultWriter, check_resumable, done_keys, read_results
+    from l3mvn.eval.results import ResultWriter, check_resumable, row_problem
 
     if args.address and args.backend != "ray":
         raise L3MVNError("--address joins a Ray cluster: add --backend ray")
@@ -309,6 +312,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         if args.scorer not in scorer_names():
             raise L3MVNError(f"unknown scorer {args.scorer!r}; valid scorers: {', '.join(scorer_names())}")
     cfg = _config(args, PolicyConfig(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise))
+    rule = cfg.task.success_rule
     check_resumable(args.out, args.resume)
     job = EvalJob.create(args.dataset, args.split, houses=args.houses, episodes_per_house=args.episodes_per_house,
                          seed=args.seed, config=cfg, policy=args.policy,
@@ -316,37 +320,42 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     eset = job.load()
     episodes = eset.episodes[: args.episodes] if args.episodes else eset.episodes
     wanted = {ep.key for ep in episodes}
-    previous = read_results(args.out) if args.resume else []
-    skip = done_keys(previous, args.policy, job.config_hash) & wanted
-    todo = [ep.key for ep in episodes if ep.key not in skip]
-    results = {r["key"]: r for r in previous if r["key"] in skip and "error" not in r}
-    print(f"{eset.name}/{eset.split}: {len(episodes)} episodes, {len(todo)} to run, policy {args.policy}, "
-          f"rule {cfg.task.success_rule}, config {job.config_hash}", file=sys.stderr)
-    if args.backend == "ray":
-        from l3mvn.eval.ray_backend import run_ray
-
-        rows = run_ray(job, todo, args.address, args.workers)
-    else:
-        rows = run_local(job, todo, args.workers or 1)
     errors, interrupted = 0, False
-    writer = ResultWriter(args.out)
-    try:
-        with closing(rows), _progress(len(todo)) as bar:
-            for row in rows:
-                writer.write(row)
-                bar.update(1)
-                if is_error_row(row):
-                    errors += 1
-                    bar.write(f"{row['key']}: error: {row['error']}")
-                    continue
-                results[row["key"]] = row
-                done = list(results.values())
-                bar.set_postfix_str(f"SR {sum(r['success'] for r in done) / len(done):.3f} "
-                                    f"SPL {sum(r['spl'] or 0 for r in done) / len(done):.3f}")
-    except KeyboardInterrupt:
-        interrupted = True  # the episodes finished so far still get their summary
-    finally:
-        writer.close()
+    with ResultWriter(args.out) as writer:
+        if writer.repair:
+            print(writer.repair, file=sys.stderr)
+        if args.resume:
+            previous = writer.previous(args.policy, job.config_hash, rule)
+            if report := previous.report(args.out):
+                print(report, file=sys.stderr)
+            results = {key: row for key, row in previous.rows.items() if key in wanted}
+        else:
+            results = {}
+        todo = [ep.key for ep in episodes if ep.key not in results]
+        print(f"{eset.name}/{eset.split}: {len(episodes)} episodes, {len(todo)} to run, policy {args.policy}, "
+              f"rule {rule}, config {job.config_hash}", file=sys.stderr)
+        if args.backend == "ray":
+            from l3mvn.eval.ray_backend import run_ray
+
+            rows = run_ray(job, todo, args.address, args.workers)
+        else:
+            rows = run_local(job, todo, args.workers or 1)
+        try:
+            with closing(rows), _progress(len(todo)) as bar:
+                for row in rows:
+                    writer.write(row)
+                    bar.update(1)
+                    problem = row["error"] if is_error_row(row) else row_problem(row, rule)
+                    if problem:
+                        errors += 1
+                        bar.write(f"{row.get('key')}: error: {problem}")
+                        continue
+                    results[row["key"]] = row
+                    done = list(results.values())
+                    bar.set_postfix_str(f"SR {sum(r['success'] for r in done) / len(done):.3f} "
+                                        f"SPL {sum(r['spl'] or 0 for r in done) / len(done):.3f}")
+        except KeyboardInterrupt:
+            interrupted = True  # the episodes finished so far still get their summary
     if errors:
         print(f"{errors} episodes failed (error rows in {args.out or 'the log above'}; --resume retries them)",
               file=sys.stderr)
