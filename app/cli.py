@@ -35,23 +35,40 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Serve until Ctrl-C, SIGTERM or SIGHUP, then stop the worker, recorder, view and web server (0).
+
+    A bad flag, host or port, or a port in use, is one line on stderr and status 2, before anything
+    is served.
+    """
     from app.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS
     from app.server import start_dashboard
     from l3mvn.config import Config, override
+    from l3mvn.serving import interrupt_on_stop_signals
 
-    try:
-        dash = start_dashboard(cfg=override(Config(), args.set), dataset=args.dataset, split=args.split, policy=args.policy, host=args.host,
-                               port=args.port, houses=args.houses, episodes_per_house=args.episodes_per_house,
-                               seed=args.seed, steps_per_second=args.speed, record=args.record,
-                               record_dir=args.record_dir, allow_origins=args.allow_origin)
-    except L3MVNError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    if args.host not in LOOPBACK_HOSTS:
-        print(f"warning: serving on {args.host}: anyone who can reach it can drive the dashboard; "
-              f"a browser that opens it by another name needs {ALLOW_ORIGIN_FLAG} http://NAME:{args.port}",
-              file=sys.stderr)
-    print(f"L3MVN Studio dashboard: {dash.url}  (Ctrl-C to stop)", flush=True)
+    with interrupt_on_stop_signals():
+        try:
+            dash = start_dashboard(cfg=override(Config(), args.set), dataset=args.dataset, split=args.split,
+                                   policy=args.policy, host=args.host, port=args.port, houses=args.houses,
+                                   episodes_per_house=args.episodes_per_house, seed=args.seed,
+                                   steps_per_second=args.speed, record=args.record, record_dir=args.record_dir,
+                                   allow_origins=args.allow_origin)
+        except L3MVNError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print("interrupted while starting; nothing was served", file=sys.stderr)
+            return 130
+        if args.host not in LOOPBACK_HOSTS:
+            print(f"warning: serving on {args.host}: anyone who can reach it can drive the dashboard; "
+                  f"a browser that opens it by another name needs {ALLOW_ORIGIN_FLAG} http://NAME:{args.port}",
+                  file=sys.stderr)
+        print(f"L3MVN Studio dashboard: {dash.url}  (Ctrl-C to stop)", flush=True)
+        _serve_until_stopped(dash)
+    return 0
+
+
+def _serve_until_stopped(dash) -> None:
+    """Wait for Ctrl-C, SIGTERM or SIGHUP (each a KeyboardInterrupt here), then stop the dashboard."""
     try:
         while True:
             time.sleep(1.0)
@@ -59,7 +76,6 @@ def run(args: argparse.Namespace) -> int:
         print("stopping", file=sys.stderr)
     finally:
         dash.stop()
-    return 0
 
 
 def serve_main(argv: list[str] | None = None) -> int:

@@ -12,7 +12,7 @@ cannot stop anyway (they can send any header they like).
 
 The ``Host`` header is checked against the same names, so a page that rebinds its own DNS name to
 this machine (DNS rebinding) is refused even for plain page loads. The port is the one the request
-arrived on, so a server that viser moved to the next free port is still matched correctly.
+arrived on, so the check never relies on the port the server was asked for.
 """
 
 from __future__ import annotations

@@ -15,6 +15,7 @@ from app.views import DashboardView
 from app.viser_hooks import start_checked_server
 from l3mvn.config import Config
 from l3mvn.datasets import load_episode_set
+from l3mvn.serving import check_listen_address
 
 log = logging.getLogger(__name__)
 
@@ -49,9 +50,13 @@ def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", po
 
     Only pages served from this dashboard's own address, or from one of ``allow_origins`` (a reverse
     proxy's public origin, ``https://host[:port]``), may connect: see app/origin.py.
+
+    It serves on exactly ``host:port``; a bad port, a host that does not resolve or is not this
+    machine's, and a port in use are one-line L3MVNErrors, checked before the episodes load.
     """
     cfg = cfg or Config()
     origins = OriginPolicy(host, allow_origins)
+    check_listen_address(host, port)
     if host not in LOOPBACK_HOSTS:
         log.warning("serving on %s: anyone who can reach this machine can drive the dashboard; browsers "
                     "that open it by another name need %s http://NAME:%d", host, ALLOW_ORIGIN_FLAG, port)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import http
 import logging
 import threading
+from types import SimpleNamespace
 from typing import Any, Callable
 
 import viser
@@ -19,6 +20,7 @@ from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
 
 from l3mvn.errors import L3MVNError
+from l3mvn.serving import bind_failure
 
 log = logging.getLogger(__name__)
 
@@ -30,8 +32,10 @@ UpdateCheck = Callable[[int, str, dict[str, Any]], bool]
 _serve_lock = threading.Lock()
 
 
-def start_checked_server(check: RequestCheck, **viser_args: Any) -> viser.ViserServer:
-    """``viser.ViserServer(**viser_args)``, with ``check`` run on every HTTP request and websocket handshake.
+def start_checked_server(check: RequestCheck, *, host: str = "0.0.0.0", port: int = 8080,
+                         **viser_args: Any) -> viser.ViserServer:
+    """``viser.ViserServer(host=host, port=port, **viser_args)``, with ``check`` run on every HTTP request
+    and websocket handshake, on exactly ``host:port``: L3MVNError (one line) if that cannot be bound.
 
     websockets' documented handshake hook is ``serve(..., process_request=...)``; viser calls
     ``websockets.asyncio.server.serve`` itself, on its own thread while ``ViserServer.__init__``
@@ -40,33 +44,70 @@ def start_checked_server(check: RequestCheck, **viser_args: Any) -> viser.ViserS
     request gets 403 and never reaches viser. The lock keeps two dashboards starting at once from
     swapping ``serve`` under each other. If viser started its server some other way, it is stopped
     and this raises: better no dashboard than one nobody guards.
+
+    The same ``serve`` keeps a failed bind from viser (see ``_Bind``): viser would try the next
+    port on an OSError, up to 1000 of them, so a busy port became another one silently and a name
+    that does not resolve was looked up 1000 times; any other error killed its thread and left
+    ``ViserServer()`` waiting forever.
     """
     real_serve = websockets.asyncio.server.serve
-    guarded = False
+    binds: list[_Bind] = []
 
     def serve(handler, *args, process_request=None, **kwargs):
-        nonlocal guarded
         def process(connection: ServerConnection, request: Request) -> Response | Any:
             refused = _refusal(check, connection, request)
             if refused is not None:
                 return connection.respond(http.HTTPStatus.FORBIDDEN, refused + "\n")
             return process_request(connection, request) if process_request is not None else None
 
-        guarded = True
-        return real_serve(handler, *args, process_request=process, **kwargs)
+        binds.append(_Bind(real_serve(handler, *args, process_request=process, **kwargs)))
+        return binds[-1]
 
     with _serve_lock:
         websockets.asyncio.server.serve = serve
         try:
-            server = viser.ViserServer(**viser_args)
+            server = viser.ViserServer(host=host, port=port, **viser_args)
         finally:
             websockets.asyncio.server.serve = real_serve
-    if not guarded:
-        server.stop()
-        raise L3MVNError(f"viser {viser.__version__} no longer starts its server through "
-                         "websockets.asyncio.server.serve, so the dashboard cannot check Origin headers; "
-                         "refusing to serve (see app/viser_hooks.py)")
-    return server
+    failure = next((bind.failure for bind in binds if bind.failure is not None), None)
+    if binds and failure is None:
+        return server
+    server.stop()
+    if failure is not None:
+        raise L3MVNError(bind_failure(host, port, failure))
+    raise L3MVNError(f"viser {viser.__version__} no longer starts its server through "
+                     "websockets.asyncio.server.serve, so the dashboard cannot check Origin headers; "
+                     "refusing to serve (see app/viser_hooks.py)")
+
+
+class _Bind:
+    """viser's ``async with serve(...)``, with a failure to bind kept here instead of raised to viser.
+
+    On failure viser gets ``_NotListening`` and reports the server ready (it cannot be told
+    otherwise); ``start_checked_server`` then stops it and raises with ``failure``.
+    """
+
+    def __init__(self, serving: Any) -> None:
+        self._serving = serving
+        self.failure: BaseException | None = None
+
+    async def __aenter__(self) -> Any:
+        try:
+            return await self._serving.__aenter__()
+        except Exception as exc:  # any failure to bind: kept for start_checked_server to report
+            self.failure = exc
+            return _NotListening()
+
+    async def __aexit__(self, *exc_info: object) -> Any:
+        if self.failure is None:
+            return await self._serving.__aexit__(*exc_info)
+        return None
+
+
+class _NotListening:
+    """What viser reads from a started ``websockets`` server (``.server.sockets``), when none started."""
+
+    server = SimpleNamespace(sockets=())
 
 
 def _refusal(check: RequestCheck, connection: ServerConnection, request: Request) -> str | None:

@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 LAYERS = [
     {"errors"},
     {"types", "config"},
-    {"viz", "scenes", "perception", "events"},
+    {"viz", "scenes", "perception", "events", "serving"},
     {"sim", "task", "language"},
     {"episodes", "mapping", "frontiers", "planning"},
     {"datasets", "looking"},

@@ -1,11 +1,13 @@
 """Recording files: their names (dataset, scene, episode, policy), the catalogue of a folder, and
-reading one back (which steps it holds, whether it is readable at all)."""
+reading one back (which steps it holds, whether it is readable at all, what survives a cut)."""
 
 from __future__ import annotations
 
 import re
+import struct
+import tempfile
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from rerun.chunk import RrdReader
@@ -15,6 +17,10 @@ from l3mvn.errors import L3MVNError
 APPLICATION_ID = "l3mvn"
 TIMELINE = "step"
 _NAME_PART = re.compile(r"[^A-Za-z0-9.-]+")
+_RRD_MAGIC = b"RRF2"
+_RRD_FILE_HEADER = 12
+_RRD_MESSAGE = struct.Struct("<QQ")
+_RRD_END = 0
 
 
 def recording_path(recordings_dir: str | Path, dataset: str | Path, scene: str, episode_id: int,
@@ -86,32 +92,84 @@ class RecordingSummary:
     recording_id: str
     entity_paths: tuple[str, ...]
     steps: tuple[int, ...]  # distinct values on the ``step`` timeline, sorted
+    lost_bytes: int = 0  # bytes after a mid-message cut, not read (see RecordingCut)
+
+
+class RecordingCut(L3MVNError):
+    """A recording cut off in the middle of a message (the writer crashed, was killed or ran out of disk).
+
+    Its first ``intact_bytes`` are whole messages: rerun's viewer shows them, and
+    ``read_recording(path, cut_ok=True)`` reads them. rerun's Python reader refuses the whole file,
+    so without this a crash mid-write would cost the entire episode instead of its last step.
+    """
+
+    def __init__(self, path: Path, intact_bytes: int, total_bytes: int) -> None:
+        self.path, self.intact_bytes, self.total_bytes = path, intact_bytes, total_bytes
+        super().__init__(f"{path} ends inside a message (cut off mid-write, or still being written): its "
+                         f"last {self.lost_bytes} of {total_bytes} bytes are incomplete")
+
+    @property
+    def lost_bytes(self) -> int:
+        return self.total_bytes - self.intact_bytes
 
 
 def open_recording(path: str | Path) -> RrdReader:
     """Rerun's reader for ``path``, or L3MVNError naming the file when it is missing or not a recording.
 
-    A recording still being written (or cut off before its footer) is accepted: rerun falls back to
-    scanning the file.
+    A file that ends between two messages (still being written, or closed before its footer) is
+    read by scanning it. A file that ends inside a message raises RecordingCut, which says where
+    the whole messages end; ``read_recording(path, cut_ok=True)`` reads up to there.
     """
     p = Path(path)
     if not p.is_file():
         raise L3MVNError(f"recording {p} not found" + ("" if not p.exists() else " (not a file)"))
     try:
+        return _reader(p)
+    except L3MVNError:
+        intact = _intact_length(p)
+        if intact is None:
+            raise
+        raise RecordingCut(p, intact, p.stat().st_size) from None
+
+
+def read_recording(path: str | Path, *, cut_ok: bool = False) -> RecordingSummary:
+    """Entity paths and step numbers of the first recording in ``path`` (reads every chunk).
+
+    A file cut off mid-message raises RecordingCut, unless ``cut_ok``: then the summary covers the
+    whole messages before the cut and ``lost_bytes`` says how much followed it.
+    """
+    p = Path(path)
+    try:
+        return _summarise(open_recording(p), p)
+    except RecordingCut as cut:
+        if not cut_ok:
+            raise
+        with tempfile.TemporaryDirectory(prefix="l3mvn-cut-") as folder:
+            prefix = _copy_prefix(p, cut.intact_bytes, Path(folder) / p.name)
+            try:
+                summary = _summarise(_reader(prefix), p)
+            except L3MVNError:  # rerun's reason names the temporary copy: of no use to the reader
+                raise L3MVNError(f"{cut}, and the {cut.intact_bytes} bytes before it hold no readable "
+                                 "recording") from None
+        return replace(summary, lost_bytes=cut.lost_bytes)
+
+
+def _reader(path: Path) -> RrdReader:
+    """``RrdReader(path)`` holding at least one recording; its failures as one-line L3MVNErrors."""
+    try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "no footer": expected for a live or interrupted recording
-            reader = RrdReader(p)
+            reader = RrdReader(path)
             recordings = reader.recordings()
     except (RuntimeError, ValueError, OSError) as exc:
-        raise L3MVNError(f"{p} is not a readable rerun recording: {one_line(exc)}") from None
+        raise L3MVNError(f"{path} is not a readable rerun recording: {one_line(exc)}") from None
     if not recordings:
-        raise L3MVNError(f"{p} holds no rerun recording (only blueprints)")
+        raise L3MVNError(f"{path} holds no rerun recording (only blueprints)")
     return reader
 
 
-def read_recording(path: str | Path) -> RecordingSummary:
-    """Entity paths and step numbers of the first recording in ``path`` (reads every chunk)."""
-    reader = open_recording(path)
+def _summarise(reader: RrdReader, path: Path) -> RecordingSummary:
+    """The summary of ``reader``'s first recording, named ``path`` (which may differ from what it reads)."""
     entry = reader.recordings()[0]
     entities: set[str] = set()
     steps: set[int] = set()
@@ -123,8 +181,47 @@ def read_recording(path: str | Path) -> RecordingSummary:
     except (RuntimeError, ValueError, OSError) as exc:
         raise L3MVNError(f"{path} is not a readable rerun recording: {one_line(exc)}") from None
     entities.discard("/__properties")
-    return RecordingSummary(Path(path), entry.application_id, entry.recording_id, tuple(sorted(entities)),
+    return RecordingSummary(path, entry.application_id, entry.recording_id, tuple(sorted(entities)),
                             tuple(sorted(s for s in steps if s is not None)))
+
+
+def _intact_length(path: Path) -> int | None:
+    """Where the whole messages of a file cut mid-message end; None if it is not cut but broken otherwise.
+
+    rerun's framing (``re_log_encoding``): a 12-byte file header starting ``RRF2``, then messages of
+    a 16-byte header (kind, payload length: little-endian u64s) and the payload. Kind 0 ends the
+    messages; the index and footer after it are not needed to read them.
+    """
+    size = path.stat().st_size
+    with path.open("rb") as f:
+        if f.read(len(_RRD_MAGIC)) != _RRD_MAGIC:
+            return None
+        offset = _RRD_FILE_HEADER
+        while offset < size:
+            f.seek(offset)
+            header = f.read(_RRD_MESSAGE.size)
+            if len(header) < _RRD_MESSAGE.size:
+                return offset
+            kind, length = _RRD_MESSAGE.unpack(header)
+            if offset + _RRD_MESSAGE.size + length > size:
+                return offset
+            if kind == _RRD_END:
+                return None
+            offset += _RRD_MESSAGE.size + length
+    return None
+
+
+def _copy_prefix(src: Path, length: int, dst: Path) -> Path:
+    """The first ``length`` bytes of ``src`` in ``dst``, copied a block at a time (recordings can be large)."""
+    with src.open("rb") as fin, dst.open("wb") as fout:
+        left = length
+        while left:
+            block = fin.read(min(left, 1 << 20))
+            if not block:
+                break
+            fout.write(block)
+            left -= len(block)
+    return dst
 
 
 def one_line(exc: BaseException) -> str:

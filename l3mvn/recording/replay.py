@@ -1,18 +1,30 @@
-"""``l3mvn replay``: open a recording in the rerun viewer, native or on the web."""
+"""``l3mvn replay``: open a recording in the rerun viewer, native or on the web.
+
+The viewer is a child process. However ``replay`` is asked to stop (Ctrl-C, SIGTERM from a service
+manager or ``kill``, SIGHUP from a closed terminal) it stops the viewer and waits for it; on Linux
+the viewer also dies with ``replay`` when that is killed outright (stop signals and the address check
+come from ``l3mvn.serving``, shared with ``l3mvn serve``).
+"""
 
 from __future__ import annotations
 
 import argparse
 import os
+import signal
 import socket
 import subprocess
 import sys
+from collections.abc import Callable
+from contextlib import suppress
 from pathlib import Path
 
 from l3mvn.errors import L3MVNError
-from l3mvn.recording.catalogue import open_recording
+from l3mvn.serving import check_listen_address, interrupt_on_stop_signals
+from l3mvn.recording.catalogue import RecordingCut, open_recording, read_recording
 
 DEFAULT_WEB_PORT = 9090
+STOP_GRACE_S = 5.0  # rerun exits at once on SIGTERM; one that has not by then is killed
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
 def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
@@ -28,30 +40,114 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run_replay(args: argparse.Namespace) -> int:
-    """Open ``args.file`` in rerun's viewer (native, or web with ``--web``); returns its exit status."""
+    """Open ``args.file`` in rerun's viewer (native, or web with ``--web``); returns its exit status.
+
+    Stopping ``replay`` (Ctrl-C, SIGTERM, SIGHUP) stops the viewer and returns 0.
+    """
     path = Path(args.file)
-    open_recording(path)
+    _check_recording(path)
     exe = viewer_executable()
-    if args.web:
-        if not 0 < args.port < 65536:
-            raise L3MVNError(f"--port must lie in 1..65535, got {args.port}")
-        if not _port_free(args.port):
-            raise L3MVNError(f"port {args.port} is in use; pick another with --port")
-        grpc = _free_port()
-        cmd = [exe, "--web-viewer", "--web-viewer-port", str(args.port), "--port", str(grpc),
-               "--bind", args.host, str(path)]
-        if args.host not in ("127.0.0.1", "localhost", "::1"):
-            print(f"warning: serving on {args.host}: anyone who can reach it can read the recording", file=sys.stderr)
-        print(f"serving {path} at {web_viewer_url(args.port, grpc)} (HTTP port {args.port}, data port {grpc}; "
-              "Ctrl-C to stop)", flush=True)
-    else:
-        if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-            raise L3MVNError("no display for the native viewer (DISPLAY is unset); use --web to serve it in a browser")
-        cmd = [exe, str(path)]
+    with interrupt_on_stop_signals():
+        cmd = _web_command(exe, path, args.host, args.port) if args.web else _native_command(exe, path)
+        return run_viewer(cmd)
+
+
+def _check_recording(path: Path) -> None:
+    """Refuse a file the viewer cannot show; for one cut off mid-write, say what it will show.
+
+    rerun's viewer reads a cut file up to the cut, so that is shown rather than refused whole.
+    """
     try:
-        return subprocess.call(cmd)
+        open_recording(path)
+    except RecordingCut as cut:
+        steps = read_recording(path, cut_ok=True).steps
+        shown = f"steps {steps[0]}..{steps[-1]}" if steps else "no steps"
+        print(f"warning: {cut}; the viewer shows what precedes the cut ({shown})", file=sys.stderr)
+
+
+def _web_command(exe: str, path: Path, host: str, port: int) -> list[str]:
+    """The viewer serving ``path`` on ``host:port`` (HTTP) and a free data port; prints the URL.
+
+    ``--serve-web``, not ``--web-viewer``: the latter also launches a browser as the viewer's own
+    child, which stopping the viewer would take down with it.
+    """
+    check_listen_address(host, port)
+    data_port = _free_port(host)
+    if host not in ("127.0.0.1", "localhost", "::1"):
+        print(f"warning: serving on {host}: anyone who can reach it can read the recording", file=sys.stderr)
+    print(f"serving {path} at {web_viewer_url(port, data_port, _url_host(host))} (HTTP port {port}, data port "
+          f"{data_port}; Ctrl-C to stop)", flush=True)
+    return [exe, "--serve-web", "--web-viewer-port", str(port), "--port", str(data_port), "--bind", host,
+            str(path)]
+
+
+def _native_command(exe: str, path: Path) -> list[str]:
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise L3MVNError("no display for the native viewer (DISPLAY is unset); use --web to serve it in a browser")
+    return [exe, str(path)]
+
+
+def run_viewer(cmd: list[str]) -> int:
+    """Run ``cmd`` until it exits (its status) or this process is interrupted (stops it, returns 0).
+
+    The viewer gets a session, so a process group, of its own: stopping it reaches anything it
+    starts, and Ctrl-C in the terminal reaches only ``replay``, which then stops the viewer the one
+    orderly way.
+    """
+    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, **_child_options())
+    try:
+        return proc.wait()
     except KeyboardInterrupt:
+        print("stopping the viewer", file=sys.stderr)
+        _stop(proc)
         return 0
+
+
+def _child_options() -> dict:
+    if os.name != "posix":
+        return {}
+    return {"start_new_session": True,
+            "preexec_fn": _die_with_parent() if sys.platform.startswith("linux") else None}
+
+
+def _die_with_parent() -> Callable[[], None]:
+    """For ``preexec_fn``: the kernel SIGKILLs the viewer when its parent dies (PR_SET_PDEATHSIG).
+
+    Covers what no handler can: ``replay`` killed with SIGKILL, or crashing. ``prctl`` is looked up
+    here, before the fork, so the child runs no more than the call. A parent that died before the
+    call would never signal, so the child checks and exits.
+    """
+    import ctypes
+
+    prctl = ctypes.CDLL(None, use_errno=True).prctl
+    parent = os.getpid()
+
+    def die_with_parent() -> None:
+        prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+        if os.getppid() != parent:
+            os._exit(1)
+
+    return die_with_parent
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    """SIGTERM the viewer's process group and wait; SIGKILL it after STOP_GRACE_S, or at a second interrupt."""
+    try:
+        _signal_group(proc, force=False)
+        proc.wait(STOP_GRACE_S)
+    except (subprocess.TimeoutExpired, KeyboardInterrupt):
+        _signal_group(proc, force=True)
+        proc.wait()
+
+
+def _signal_group(proc: subprocess.Popen, *, force: bool) -> None:
+    if proc.returncode is not None:  # reaped: its group id may belong to someone else by now
+        return
+    if os.name != "posix":
+        (proc.kill if force else proc.terminate)()
+        return
+    with suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGKILL if force else signal.SIGTERM)
 
 
 def viewer_executable() -> str:
@@ -78,16 +174,16 @@ def web_viewer_url(web_port: int, grpc_port: int, host: str = "127.0.0.1") -> st
     return f"http://{host}:{web_port}/?url={quote(f'rerun+http://{host}:{grpc_port}/proxy', safe='')}"
 
 
-def _port_free(port: int) -> bool:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        try:
-            s.bind(("0.0.0.0", port))
-        except OSError:
-            return False
-    return True
+def _url_host(host: str) -> str:
+    """``host`` as a browser should be given it: a wildcard bind is reached on loopback; IPv6 in brackets."""
+    if host in ("0.0.0.0", "::"):
+        return "127.0.0.1"
+    return f"[{host}]" if ":" in host else host
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
+def _free_port(host: str) -> int:
+    """A port free on ``host`` now (for the viewer's data port, which nobody types)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
         return s.getsockname()[1]
