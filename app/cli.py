@@ -58,18 +58,20 @@ def run(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             print("interrupted while starting; nothing was served", file=sys.stderr)
             return 130
-        if args.host not in LOOPBACK_HOSTS:
-            print(f"warning: serving on {args.host}: anyone who can reach it can drive the dashboard; "
-                  f"a browser that opens it by another name needs {ALLOW_ORIGIN_FLAG} http://NAME:{args.port}",
-                  file=sys.stderr)
-        print(f"L3MVN Studio dashboard: {dash.url}  (Ctrl-C to stop)", flush=True)
-        _serve_until_stopped(dash)
+        _serve_until_stopped(dash, args.host, args.port, ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS)
     return 0
 
 
-def _serve_until_stopped(dash) -> None:
-    """Wait for Ctrl-C, SIGTERM or SIGHUP (each a KeyboardInterrupt here), then stop the dashboard."""
+def _serve_until_stopped(dash, host: str, port: int, allow_flag: str, loopback: tuple[str, ...]) -> None:
+    """Say where it serves, wait for Ctrl-C, SIGTERM or SIGHUP (each a KeyboardInterrupt here), then
+    stop the dashboard. The announcement is inside the guarded block: a signal that arrives right
+    after the URL line (a supervisor that starts and stops at once) still stops everything."""
     try:
+        if host not in loopback:
+            print(f"warning: serving on {host}: anyone who can reach it can drive the dashboard; "
+                  f"a browser that opens it by another name needs {allow_flag} http://NAME:{port}",
+                  file=sys.stderr)
+        print(f"L3MVN Studio dashboard: {dash.url}  (Ctrl-C to stop)", flush=True)
         while True:
             time.sleep(1.0)
     except KeyboardInterrupt:

@@ -94,12 +94,14 @@ def run_viewer(cmd: list[str]) -> int:
     starts, and Ctrl-C in the terminal reaches only ``replay``, which then stops the viewer the one
     orderly way.
     """
-    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, **_child_options())
+    proc = None
     try:
+        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, **_child_options())
         return proc.wait()
     except KeyboardInterrupt:
         print("stopping the viewer", file=sys.stderr)
-        _stop(proc)
+        if proc is not None:
+            _stop(proc)
         return 0
 
 
