@@ -273,7 +273,10 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     _, scenes = _scenes(args)
     out = Path(args.out)
     split_out = out / args.split
-    split_out.mkdir(parents=True, exist_ok=True)
+    try:
+        split_out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise L3MVNError(f"--out {out}: cannot create {split_out} ({exc.strerror or exc})") from None
     maps = split_out / f"{args.split}_info.pbz2"
     if args.dataset is None:
         save_split(out, args.split, [to_semexp_channels(f) for fl in scenes.values() for f in fl.values()])
@@ -426,6 +429,13 @@ def _cmd_config(args: argparse.Namespace) -> int:
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
+    """Check --out before the render and --pose against the built world: an unknown image extension, a
+    directory, an unwritable place or a camera outside the map or inside a wall would otherwise be a
+    traceback or a silently wrong picture."""
+    import io
+    import os
+    import warnings
+
     import numpy as np
     from PIL import Image
 
@@ -436,23 +446,77 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from l3mvn.sim.world import build_world
     from l3mvn.viz import colorize_depth, colorize_semantic, side_by_side
 
+    def writes_rgb(fmt: str) -> bool:
+        """Whether PIL can encode our RGB panel as ``fmt`` (XBM, MSP, ... cannot; tried on one pixel)."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # deprecation notices of formats the user did not pick
+            try:
+                Image.new("RGB", (1, 1)).save(io.BytesIO(), format=fmt)
+            except (OSError, ValueError, KeyError, TypeError):
+                return False
+        return True
+
+    def checked_out(text: str) -> tuple[Path, str]:
+        out = Path(text)
+        if "\0" in text:
+            raise L3MVNError(f"--out {text!r} contains a NUL character")
+        if out.is_dir():
+            raise L3MVNError(f"--out {text} is a directory; give an image file such as {out / 'frame.png'}")
+        Image.init()
+        extensions = Image.registered_extensions()
+        fmt = extensions.get(out.suffix.lower())
+        if fmt is None or not writes_rgb(fmt):
+            problem = f"unknown image extension {out.suffix!r}" if out.suffix else "no image extension"
+            if fmt is not None:
+                problem = f"{fmt} cannot hold an RGB image"
+            valid = sorted(ext for ext, f in extensions.items() if writes_rgb(f))
+            raise L3MVNError(f"--out {text}: {problem}; valid: {', '.join(valid)}")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if not os.access(out.parent, os.W_OK):
+            raise L3MVNError(f"--out {text}: {out.parent} is not writable")
+        return out, fmt
+
+    def checked_pose(text: str, scene, world) -> Pose:
+        try:
+            x, y, h = (float(v) for v in text.split(","))
+        except ValueError:
+            raise L3MVNError(f"--pose must be X,Y,HEADING_DEG (metres, degrees), got {text!r}") from None
+        if not all(math.isfinite(v) for v in (x, y, h)):
+            raise L3MVNError(f"--pose needs finite numbers, got {text!r}")
+        if not scene.contains(x, y):
+            raise L3MVNError(f"--pose {x:g},{y:g} lies outside the map of {scene.key}, "
+                             f"which spans {scene.extent_text()}")
+        r, c = scene.cell_of(x, y)
+        if world.walls[r, c] or world.furniture[r, c] or scene.object_any[r, c]:
+            raise L3MVNError(f"--pose {x:g},{y:g} is off the floor of {scene.key}: cell ({r}, {c}) is a wall, "
+                             "furniture or an object; omit --pose for a random navigable pose")
+        return Pose(x, y, math.remainder(math.radians(h), 2 * math.pi))
+
     cfg = _config(args).sim
+    try:
+        out, fmt = checked_out(args.out)
+    except OSError as exc:  # a parent that is a file, a name too long, no permission
+        raise L3MVNError(f"--out {args.out}: cannot write there ({exc.strerror or exc})") from None
     source, scenes = _scenes(args)
     name = args.scene or sorted(scenes)[0]
     scene = pick_floor(scenes, name, args.floor, where=str(source))
+    world = build_world(scene, cfg)
     if args.pose:
-        try:
-            x, y, h = (float(v) for v in args.pose.split(","))
-        except ValueError:
-            raise L3MVNError(f"--pose must be X,Y,HEADING_DEG, got {args.pose!r}") from None
-        pose = Pose(x, y, math.radians(h))
+        pose = checked_pose(args.pose, scene, world)
     else:
         pose = random_walkable_pose(scene, np.random.default_rng(args.seed))
-    frame = Renderer(build_world(scene, cfg), cfg).render(pose, 0.0)
+    frame = Renderer(world, cfg).render(pose, 0.0)
     panel = side_by_side(frame.rgb, colorize_depth(frame.depth, cfg.max_depth_m),
                          colorize_semantic(frame.semantic, scene.categories))
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(panel).save(args.out)
+    encoded = io.BytesIO()
+    try:
+        Image.fromarray(panel).save(encoded, format=fmt)
+    except (OSError, ValueError) as exc:
+        raise L3MVNError(f"--out {args.out}: cannot encode the image as {fmt} ({exc}); use .png") from None
+    try:
+        out.write_bytes(encoded.getvalue())
+    except OSError as exc:
+        raise L3MVNError(f"--out {args.out}: cannot write ({exc.strerror or exc})") from None
     print(f"wrote {args.out}: {scene.key} at x={pose.x:.2f} y={pose.y:.2f} "
           f"heading={math.degrees(pose.heading):.0f} deg")
     return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -40,9 +41,10 @@ def load_episode_set(
 ) -> EpisodeSet:
     """A SemExp dataset's split with its episode files, or (``dataset=None``) procedural houses with
     generated episodes, seeded so the same arguments always give the same set."""
+    _check_whole("seed", seed, 0)
     if dataset is None:
-        if houses < 1 or episodes_per_house < 1:
-            raise L3MVNError("procedural houses need --houses >= 1 and --episodes-per-house >= 1")
+        _check_whole("--houses", houses, 1)
+        _check_whole("--episodes-per-house", episodes_per_house, 1)
         scenes = procedural_split(houses, seed)
         episodes: list[Episode] = []
         for name in sorted(scenes):
@@ -51,3 +53,10 @@ def load_episode_set(
         return EpisodeSet(PROCEDURAL, split, scenes, episodes)
     scenes = load_split(dataset, split)
     return EpisodeSet(Path(dataset).resolve().name, split, scenes, read_episodes(dataset, split, scenes))
+
+
+def _check_whole(name: str, value: object, low: int) -> None:
+    """Counts and seeds arrive from job files and the API as well as argparse: 2.5 houses or a
+    ``True`` seed must be refused, not truncated."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
+        raise L3MVNError(f"{name} must be a whole number >= {low}, got {value!r}")

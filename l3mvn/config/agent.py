@@ -67,6 +67,9 @@ class AgentConfig:
     glimpse_max_fraction: float = 0.05
 
     def __post_init__(self) -> None:
+        if self.map_input_height < 1 or self.map_input_width < 1:
+            raise L3MVNError(f"map_input_height and map_input_width must be >= 1, got "
+                             f"{self.map_input_height}x{self.map_input_width}")
         if self.replan_every < 1 or self.target_min_cells < 1 or self.goal_patience_steps < 1:
             raise L3MVNError("replan_every, target_min_cells and goal_patience_steps must be >= 1")
         if not (self.commitment_radius_m > 0 and self.goal_progress_m > 0):

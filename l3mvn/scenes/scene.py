@@ -51,6 +51,12 @@ class SceneMap:
 
     def __post_init__(self) -> None:
         nav, obj = self.navigable, self.objects
+        if not (isinstance(nav, np.ndarray) and isinstance(obj, np.ndarray)):
+            raise L3MVNError(f"scene {self.name}: navigable and objects must be numpy arrays")
+        if nav.dtype.kind not in "biuf" or obj.dtype.kind not in "biuf":
+            raise L3MVNError(f"scene {self.name}: navigable and objects must be numeric arrays, "
+                             f"got {nav.dtype} and {obj.dtype}")
+        self._check_geometry()
         if nav.ndim != 2 or obj.ndim != 3 or obj.shape[1:] != nav.shape:
             raise L3MVNError(
                 f"scene {self.name}: navigable {nav.shape} and objects {obj.shape} shapes disagree"
@@ -63,6 +69,16 @@ class SceneMap:
             raise L3MVNError(f"scene {self.name} floor {self.floor}: no navigable cell")
         object.__setattr__(self, "navigable", nav.astype(bool, copy=False))
         object.__setattr__(self, "objects", obj.astype(bool, copy=False))
+
+    def _check_geometry(self) -> None:
+        """Non-finite or non-positive geometry would turn every pose conversion into NaN or an overflow."""
+        if not (math.isfinite(self.resolution_m) and self.resolution_m > 0):
+            raise L3MVNError(f"scene {self.name}: resolution_m must be a positive finite number, "
+                             f"got {self.resolution_m}")
+        if len(self.origin_cm) != 2 or not all(math.isfinite(v) for v in self.origin_cm):
+            raise L3MVNError(f"scene {self.name}: origin_cm must be two finite numbers, got {self.origin_cm}")
+        if not math.isfinite(self.floor_height_m):
+            raise L3MVNError(f"scene {self.name}: floor_height_m must be finite, got {self.floor_height_m}")
 
     @property
     def key(self) -> str:
@@ -113,6 +129,25 @@ class SceneMap:
     def in_bounds(self, row: int, col: int) -> bool:
         h, w = self.shape
         return 0 <= row < h and 0 <= col < w
+
+    @property
+    def extent_m(self) -> tuple[float, float]:
+        """World size (x, y) of the grid in metres: it covers ``0 <= x < width`` and ``0 <= y < height``."""
+        h, w = self.shape
+        return w * self.resolution_m, h * self.resolution_m
+
+    def contains(self, x: float, y: float) -> bool:
+        """Whether a world point lies on the grid. Check it before ``cell_of``: a point such as 1e308
+        overflows there, and any point off the grid indexes outside the arrays."""
+        width, height = self.extent_m
+        return 0.0 <= x < width and 0.0 <= y < height and self.in_bounds(*self.cell_of(x, y))
+
+    def extent_text(self) -> str:
+        """The grid's extent for error messages, in our frame and in the Habitat frame of episode files."""
+        width, height = self.extent_m
+        ox, oy = self.origin_cm[0] / 100.0, self.origin_cm[1] / 100.0
+        return (f"x 0..{width:.2f} m, y 0..{height:.2f} m (Habitat p2 {ox:.2f}..{ox + width:.2f}, "
+                f"p0 {oy:.2f}..{oy + height:.2f})")
 
     def pose_from_habitat(self, position: list[float], rotation_wxyz: list[float]) -> Pose:
         """Habitat position ``[p0, p1 (up), p2]`` and a (w, x, y, z) yaw quaternion -> our pose.

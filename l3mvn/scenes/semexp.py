@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import bz2
 import pickle
+import reprlib
 from pathlib import Path
 
 import numpy as np
@@ -14,9 +15,26 @@ import numpy as np
 from l3mvn.errors import L3MVNError
 from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
 
+# Coordinates (origin, floor height) beyond this many metres are no building's: they only turn
+# later arithmetic into overflows (10,000 km is far past any real map and far below float range).
+MAX_COORDINATE_M = 1e7
+# The format's record of one floor (save_split writes all three).
+RECORD_KEYS = ("sem_map", "origin", "floor_height")
+
 
 def split_dir(dataset: str | Path, split: str) -> Path:
     root = Path(dataset)
+    try:
+        return _existing_split(root, split)
+    except OSError as exc:  # a name too long, a loop of links: pathlib re-raises all but "missing"
+        raise L3MVNError(f"cannot read split {split!r} of dataset {root} ({exc.strerror or exc})") from None
+
+
+def _existing_split(root: Path, split: str) -> Path:
+    """``root/split``, or an error naming what is wrong: the root is a file or missing, or the split
+    is unknown (listing the splits there are)."""
+    if root.exists() and not root.is_dir():
+        raise L3MVNError(f"dataset {root} is a file; give the dataset directory (it holds <split>/<split>_info.pbz2)")
     if not root.is_dir():
         raise L3MVNError(f"dataset directory {root} does not exist")
     path = root / split
@@ -28,14 +46,28 @@ def split_dir(dataset: str | Path, split: str) -> Path:
 
 def info_path(dataset: str | Path, split: str) -> Path:
     path = split_dir(dataset, split) / f"{split}_info.pbz2"
-    if not path.is_file():
+    try:
+        found = path.is_file()
+    except OSError as exc:
+        raise L3MVNError(f"cannot read {path} ({exc.strerror or exc})") from None
+    if not found:
         raise L3MVNError(f"{path} is missing: a SemExp split needs <split>/<split>_info.pbz2")
     return path
 
 
+def _show(value: object) -> str:
+    """A bad value in an error message: short, and on one line (numpy reprs span several)."""
+    if isinstance(value, np.ndarray):
+        return f"an array of shape {value.shape} and dtype {value.dtype}"
+    return reprlib.repr(value).replace("\n", " ")
+
+
 def _plain_dtype(*args, **kwargs) -> np.dtype:
-    """``np.dtype`` for the unpickler, refusing object dtypes (their payload would be more pickles)."""
-    dtype = np.dtype(*args, **kwargs)
+    """``np.dtype`` for the unpickler, refusing object dtypes (their payload would be more pickles)
+    and flags other than the 0/1 (``align``, ``copy``) numpy writes, which newer numpy rejects noisily."""
+    if kwargs or not all(isinstance(a, (bool, int, np.bool_, np.integer)) and a in (0, 1) for a in args[1:]):
+        raise pickle.UnpicklingError("a dtype with arguments numpy never writes")
+    dtype = np.dtype(*args)
     if dtype.hasobject:
         raise pickle.UnpicklingError("object arrays are not part of the SemExp format")
     return dtype
@@ -73,9 +105,10 @@ def read_info(path: Path) -> object:
         with bz2.BZ2File(path) as fh:
             return _FormatUnpickler(fh).load()
     except pickle.UnpicklingError as exc:
-        raise L3MVNError(f"{path} is not a SemExp map file ({exc})") from None
-    except (OSError, EOFError, ValueError, AttributeError, ImportError, TypeError, IndexError, KeyError) as exc:
-        raise L3MVNError(f"{path} is corrupt or truncated ({type(exc).__name__}: {exc})") from None
+        raise L3MVNError(f"{path} is not a SemExp map file ({' '.join(str(exc).split())})") from None
+    except (OSError, EOFError, ValueError, AttributeError, ImportError, TypeError, IndexError, KeyError,
+            OverflowError, RecursionError, MemoryError) as exc:
+        raise L3MVNError(f"{path} is corrupt or truncated ({type(exc).__name__}: {_show(str(exc))})") from None
 
 
 def load_split(dataset: str | Path, split: str, **scene_kwargs) -> dict[str, dict[int, SceneMap]]:
@@ -85,14 +118,32 @@ def load_split(dataset: str | Path, split: str, **scene_kwargs) -> dict[str, dic
     if not isinstance(raw, dict) or not raw:
         raise L3MVNError(f"{path}: expected a non-empty dict {{scene: {{floor: map}}}}, got {type(raw).__name__}")
     scenes: dict[str, dict[int, SceneMap]] = {}
-    for name, floors in raw.items():
+    for key, floors in raw.items():
+        name = _scene_name(path, key)
         if not isinstance(floors, dict) or not floors:
-            raise L3MVNError(f"{path}: scene {name!r} has no floors")
-        scenes[str(name)] = {
-            int(fid): _floor_from_record(path, str(name), int(fid), rec, scene_kwargs)
-            for fid, rec in floors.items()
-        }
+            raise L3MVNError(f"{path}: scene {name} has no floors (expected a non-empty dict {{floor: map}})")
+        scenes[name] = {}
+        for fkey, rec in floors.items():
+            floor = _floor_id(path, name, fkey)
+            scenes[name][floor] = _floor_from_record(path, name, floor, rec, scene_kwargs)
     return scenes
+
+
+def _scene_name(path: Path, key: object) -> str:
+    """A scene key names files (``<scene>_episodes.json.gz``) and keys (``scene/floor/id``), so it
+    must be a plain printable name: no path separator, never ``.`` or ``..``."""
+    if not isinstance(key, str) or not key or not key.isprintable() or any(c in key for c in "/\\") \
+            or key in (".", ".."):
+        raise L3MVNError(f"{path}: scene keys must be plain names such as 'Allensville' (no '/' or '\\'), "
+                         f"got {_show(key)}")
+    return key
+
+
+def _floor_id(path: Path, name: str, key: object) -> int:
+    """Floor keys are whole numbers (``floor_id`` in episode files refers to them)."""
+    if isinstance(key, (bool, np.bool_)) or not isinstance(key, (int, np.integer)):
+        raise L3MVNError(f"{path}: scene {name}: floor keys must be whole numbers such as 0, got {_show(key)}")
+    return int(key)
 
 
 def load_scene(dataset: str | Path, split: str, scene: str, floor: int = 0, **scene_kwargs) -> SceneMap:
@@ -110,28 +161,57 @@ def pick_floor(scenes: dict[str, dict[int, SceneMap]], scene: str, floor: int, w
 
 
 def _floor_from_record(path: Path, name: str, floor: int, rec: object, scene_kwargs: dict) -> SceneMap:
+    """One floor's ``{"sem_map", "origin", "floor_height"}``, every field typed and finite."""
     where = f"{path}: scene {name} floor {floor}"
     if not isinstance(rec, dict) or "sem_map" not in rec:
-        raise L3MVNError(f"{where}: record lacks 'sem_map'")
-    sem = np.asarray(rec["sem_map"])
-    if sem.ndim != 3 or sem.shape[0] < 2:
-        raise L3MVNError(f"{where}: sem_map must be (channels, H, W), got shape {sem.shape}")
-    if sem.shape[0] - 1 > len(GIBSON_CATEGORIES):
-        raise L3MVNError(f"{where}: {sem.shape[0] - 1} object channels, the format defines {len(GIBSON_CATEGORIES)}")
-    if not np.isfinite(sem).all():
-        raise L3MVNError(f"{where}: sem_map contains non-finite values")
-    origin = np.asarray(rec.get("origin", (0, 0)), dtype=np.float64).reshape(-1)
-    if origin.shape != (2,) or not np.isfinite(origin).all():
-        raise L3MVNError(f"{where}: origin must be two finite numbers (ox_cm, oy_cm)")
-    height = float(rec.get("floor_height", 0.0))
+        raise L3MVNError(f"{where}: record lacks 'sem_map' (a floor record is a dict of {', '.join(RECORD_KEYS)})")
+    sem = _sem_map(where, rec["sem_map"])
+    missing = [k for k in RECORD_KEYS if k not in rec]
+    if missing:
+        raise L3MVNError(f"{where}: record lacks {', '.join(map(repr, missing))} "
+                         f"(the format has {', '.join(RECORD_KEYS)})")
+    origin = _numeric_array(where, "origin", rec["origin"]).astype(np.float64)
+    if origin.shape != (2,) or not (np.abs(origin) <= MAX_COORDINATE_M * 100).all():
+        raise L3MVNError(f"{where}: origin must be two finite numbers (ox_cm, oy_cm) within "
+                         f"{MAX_COORDINATE_M * 100:.0e} cm, got {_show(rec['origin'])}")
+    height = _numeric_array(where, "floor_height", rec["floor_height"])
+    if height.shape != () or not abs(float(height)) <= MAX_COORDINATE_M:
+        raise L3MVNError(f"{where}: floor_height must be one finite number within {MAX_COORDINATE_M:.0e} m, "
+                         f"got {_show(rec['floor_height'])}")
     cats = GIBSON_CATEGORIES[: sem.shape[0] - 1]
     try:
         return SceneMap(
             name=name, floor=floor, categories=cats, navigable=sem[0] > 0.5, objects=sem[1:] > 0.5,
-            origin_cm=(float(origin[0]), float(origin[1])), floor_height_m=height, **scene_kwargs,
+            origin_cm=(float(origin[0]), float(origin[1])), floor_height_m=float(height), **scene_kwargs,
         )
     except L3MVNError as exc:
         raise L3MVNError(f"{path}: {exc}") from None
+
+
+def _sem_map(where: str, value: object) -> np.ndarray:
+    """(1 + categories, H, W) of finite numbers: channel 0 navigable, then the format's categories."""
+    sem = _numeric_array(where, "sem_map", value)
+    if sem.ndim != 3 or sem.shape[0] < 2 or 0 in sem.shape:
+        raise L3MVNError(f"{where}: sem_map must be (channels, H, W) with 2-{len(GIBSON_CATEGORIES) + 1} "
+                         f"channels, got shape {sem.shape}")
+    if sem.shape[0] - 1 > len(GIBSON_CATEGORIES):
+        raise L3MVNError(f"{where}: {sem.shape[0] - 1} object channels, the format defines {len(GIBSON_CATEGORIES)}")
+    if not np.isfinite(sem).all():
+        raise L3MVNError(f"{where}: sem_map contains non-finite values")
+    return sem
+
+
+def _numeric_array(where: str, key: str, value: object) -> np.ndarray:
+    """``value`` as an array of real numbers (bool, int or float dtype; bools are not numbers here
+    except in sem_map, whose 0/1 cells they are)."""
+    try:
+        arr = np.asarray(value)
+    except (ValueError, TypeError, OverflowError, RecursionError):
+        arr = np.asarray(None)
+    allowed = "biuf" if key == "sem_map" else "iuf"
+    if arr.dtype.kind not in allowed:
+        raise L3MVNError(f"{where}: {key} must be numeric, got {_show(value)} ({type(value).__name__})")
+    return arr
 
 
 def to_semexp_channels(scene: SceneMap) -> SceneMap:
