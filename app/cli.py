@@ -6,7 +6,7 @@ import argparse
 import sys
 import time
 
-from l3mvn.errors import L3MVNError
+from l3mvn.errors import L3MVNError, one_line
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
                                    steps_per_second=args.speed, record=args.record, record_dir=args.record_dir,
                                    allow_origins=args.allow_origin)
         except L3MVNError as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            print(f"error: {one_line(exc)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             print("interrupted while starting; nothing was served", file=sys.stderr)

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from l3mvn.config import SUCCESS_RULES, Config, PolicyConfig, TaskConfig, config_dict, config_hash, override
-from l3mvn.errors import L3MVNError
+from l3mvn.errors import L3MVNError, one_line
 
 
 def _frame(text: str) -> tuple[int, int]:
@@ -189,7 +189,7 @@ def main(argv: list[str] | None = None, extra: dict[str, Command] | None = None)
         if args.command == "train-head":
             return _cmd_train_head(args)
     except L3MVNError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted: finished episodes are saved", file=sys.stderr)
@@ -501,7 +501,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
     name = args.scene or sorted(scenes)[0]
     scene = pick_floor(scenes, name, args.floor, where=str(source))
     world = build_world(scene, cfg)
-    if args.pose:
+    if args.pose is not None:  # an empty --pose is a mistake, not a request for a random pose
         pose = checked_pose(args.pose, scene, world)
     else:
         pose = random_walkable_pose(scene, np.random.default_rng(args.seed))

@@ -7,3 +7,8 @@ name the offending file or value and the valid choices.
 
 class L3MVNError(ValueError):
     """A bad input (file, flag, request) explained in one line."""
+
+
+def one_line(exc: BaseException) -> str:
+    """The message on one line: a value quoted into it (a path with a newline) cannot break it."""
+    return str(exc).replace("\r", "\\r").replace("\n", "\\n")

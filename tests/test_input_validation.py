@@ -248,6 +248,7 @@ def _render(tiny_dataset, *extra) -> list[str]:
     ("5.0,1.0,0", r"is off the floor of Tiny/0: cell \(20, 100\)"),  # the wall between the rooms
     ("nan,2,0", r"--pose needs finite numbers, got 'nan,2,0'"),
     ("2,3", r"--pose must be X,Y,HEADING_DEG \(metres, degrees\), got '2,3'"),
+    ("", r"--pose must be X,Y,HEADING_DEG \(metres, degrees\), got ''"),
 ])
 def test_render_refuses_a_pose_off_the_map_or_floor(tiny_dataset, tmp_path, capsys, pose, message):
     assert main(_render(tiny_dataset, f"--pose={pose}", "--out", str(tmp_path / "a.png"))) == 2

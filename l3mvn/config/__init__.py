@@ -101,7 +101,7 @@ def _resolve(cfg: Config, name: str) -> tuple[str, str]:
     section, dot, key = name.partition(".")
     if dot:
         if section not in SECTIONS:
-            raise L3MVNError(f"unknown config section {section!r} in --set {name}; sections: {', '.join(SECTIONS)}")
+            raise L3MVNError(f"unknown config section {section!r} in --set {name!r}; sections: {', '.join(SECTIONS)}")
         fields = [f.name for f in dataclasses.fields(getattr(cfg, section)) if f.init]
         if key not in fields:
             raise L3MVNError(f"unknown setting {key!r} in section {section}; valid: {', '.join(sorted(fields))}")
