@@ -14,7 +14,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from l3mvn.errors import L3MVNError
+from l3mvn.errors import L3MVNError, first_line
 
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
 _PORT_HINTS = 20  # ports above a busy one tried for the "--port N is free" hint
@@ -62,7 +62,7 @@ def check_listen_address(host: str, port: int) -> None:
 def bind_failure(host: str, port: int, exc: BaseException) -> str:
     """Why ``host:port`` cannot be served, in one line, with the flag to change."""
     if isinstance(exc, (socket.gaierror, UnicodeError)):
-        return f"--host {host}: cannot resolve it ({getattr(exc, 'strerror', None) or _first_line(exc)})"
+        return f"--host {host}: cannot resolve it ({getattr(exc, 'strerror', None) or first_line(exc)})"
     if isinstance(exc, OverflowError):
         return f"--port must lie in 1..65535, got {port}"
     code = getattr(exc, "errno", None)
@@ -75,7 +75,7 @@ def bind_failure(host: str, port: int, exc: BaseException) -> str:
         return f"--host {host} is not an address of this machine; give one of its own, or 0.0.0.0 for all"
     if code == errno.EACCES:
         return f"port {port} on {host} needs privileges; pick one above 1023 with --port N"
-    return f"cannot listen on {host} port {port}: {_first_line(exc)}"
+    return f"cannot listen on {host} port {port}: {first_line(exc)}"
 
 
 def _cannot_bind(host: str, port: int) -> BaseException | None:
@@ -98,7 +98,3 @@ def _cannot_bind(host: str, port: int) -> BaseException | None:
             except OSError as exc:
                 return exc
     return None
-
-
-def _first_line(exc: BaseException) -> str:
-    return (str(exc).strip().splitlines() or [type(exc).__name__])[0]

@@ -23,7 +23,7 @@ from collections import Counter, deque
 from contextlib import contextmanager, suppress
 from typing import Callable, Iterable, Iterator
 
-from l3mvn.errors import L3MVNError
+from l3mvn.errors import L3MVNError, first_line
 from l3mvn.eval.backends import interrupt_on_sigterm
 from l3mvn.eval.job import EvalJob, error_row
 
@@ -112,9 +112,9 @@ def _schedule(ray, job: EvalJob, keys: list[str], actors: list, actor_cls, max_r
                 pending.appendleft(key)
             else:
                 row = error_row(job, key, f"Ray worker died {strikes[key]} times running this episode: "
-                                f"{_first_line(exc)}")
+                                f"{first_line(exc)}")
         except RayError as exc:
-            row = error_row(job, key, f"Ray task failed: {_first_line(exc)}")
+            row = error_row(job, key, f"Ray task failed: {first_line(exc)}")
         submit(actor)  # keep the actor busy while the caller handles the row
         if row is not None:
             yield row
@@ -171,7 +171,7 @@ def _init(ray, where: str, **kwargs) -> None:
         ray.init(include_dashboard=False, logging_level=logging.ERROR, log_to_driver=False,
                  configure_logging=True, **kwargs)
     except (ConnectionError, RuntimeError, ValueError) as exc:
-        raise L3MVNError(f"could not start or join {where}: {_first_line(exc)}") from None
+        raise L3MVNError(f"could not start or join {where}: {first_line(exc)}") from None
 
 
 _CLUSTERS_SWITCH = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
@@ -309,8 +309,3 @@ def _import_ray():
     except ImportError:
         raise L3MVNError("the Ray backend needs Ray: pip install 'l3mvn[distributed]'") from None
     return ray
-
-
-def _first_line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__

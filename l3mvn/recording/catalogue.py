@@ -12,7 +12,7 @@ from pathlib import Path
 
 from rerun.chunk import RrdReader
 
-from l3mvn.errors import L3MVNError
+from l3mvn.errors import L3MVNError, first_line
 
 APPLICATION_ID = "l3mvn"
 TIMELINE = "step"
@@ -162,7 +162,7 @@ def _reader(path: Path) -> RrdReader:
             reader = RrdReader(path)
             recordings = reader.recordings()
     except (RuntimeError, ValueError, OSError) as exc:
-        raise L3MVNError(f"{path} is not a readable rerun recording: {one_line(exc)}") from None
+        raise L3MVNError(f"{path} is not a readable rerun recording: {first_line(exc)}") from None
     if not recordings:
         raise L3MVNError(f"{path} holds no rerun recording (only blueprints)")
     return reader
@@ -179,7 +179,7 @@ def _summarise(reader: RrdReader, path: Path) -> RecordingSummary:
             if TIMELINE in chunk.timeline_names:
                 steps.update(chunk.to_record_batch().column(TIMELINE).to_pylist())
     except (RuntimeError, ValueError, OSError) as exc:
-        raise L3MVNError(f"{path} is not a readable rerun recording: {one_line(exc)}") from None
+        raise L3MVNError(f"{path} is not a readable rerun recording: {first_line(exc)}") from None
     entities.discard("/__properties")
     return RecordingSummary(path, entry.application_id, entry.recording_id, tuple(sorted(entities)),
                             tuple(sorted(s for s in steps if s is not None)))
@@ -222,7 +222,3 @@ def _copy_prefix(src: Path, length: int, dst: Path) -> Path:
             fout.write(block)
             left -= len(block)
     return dst
-
-
-def one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split())

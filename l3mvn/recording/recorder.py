@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from l3mvn.errors import L3MVNError
+from l3mvn.errors import L3MVNError, first_line
 from l3mvn.events import EventBus, StepEvent
-from l3mvn.recording.catalogue import APPLICATION_ID, TIMELINE, one_line, recording_path
+from l3mvn.recording.catalogue import APPLICATION_ID, TIMELINE, recording_path
 from l3mvn.recording.layout import default_blueprint
 from l3mvn.types import Episode
 from l3mvn.viz import BACKGROUND_RGB, category_palette
@@ -49,7 +49,7 @@ class Recorder:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._rec.save(self.path, default_blueprint=default_blueprint())
         except (OSError, RuntimeError, ValueError) as exc:
-            raise L3MVNError(f"cannot write recording {self.path}: {one_line(exc)}") from None
+            raise L3MVNError(f"cannot write recording {self.path}: {first_line(exc)}") from None
         self._rec.send_recording_name(f"{Path(str(dataset)).name} {scene} #{episode_id} {policy}")
         self._lock = threading.Lock()
         self._closed = False
