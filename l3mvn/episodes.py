@@ -180,9 +180,10 @@ def _geodesic(where: str, info: object) -> float:
     value = info.get("geodesic_distance")
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return float("nan")
-    if not (_is_number(value) and math.isfinite(value) and value >= 0):
+    metres = _float_or_inf(value) if _is_number(value) else math.nan
+    if not (math.isfinite(metres) and metres >= 0):
         raise L3MVNError(f"{where}: info.geodesic_distance must be a finite number >= 0 (metres), got {_show(value)}")
-    return float(value)
+    return metres
 
 
 def _is_number(value: object) -> bool:
