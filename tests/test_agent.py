@@ -50,7 +50,7 @@ def _run(env, agent, episode):
     session.start(episode)
     events = []
     while not session.done:
-        blocked_before = list(agent._blocked)
+        blocked_before = list(agent.explore.blocked)
         events.append((session.step(), blocked_before))
     return session.result, events
 
@@ -138,11 +138,11 @@ def test_reached_frontiers_are_not_chosen_again(env):
     radius = agent.cfg.blocked_radius_m / 0.05
     chosen = 0
     for _ in range(200):
-        blocked = list(agent._blocked)
+        blocked = list(agent.explore.blocked)
         d = agent.act(obs)
         obs = env.step(d.action)
         fresh = d.timings_ms.get("frontiers", 0.0) > 0.0
-        if d.goal_kind != "frontier" or not blocked or not fresh or len(agent._blocked) < len(blocked):
+        if d.goal_kind != "frontier" or not blocked or not fresh or len(agent.explore.blocked) < len(blocked):
             continue  # (a shorter list: the fallback forgot them all, as nothing else was left)
         gaps = np.hypot(*(np.array(blocked) - np.array(d.long_term_goal)).T)
         assert gaps.min() > radius
@@ -339,12 +339,12 @@ def test_with_no_frontier_left_the_agent_goes_to_look_at_floor_it_only_saw_from_
                           local_cells=n, footprint_radius_cells=3)
     agent = _agent(env)
     agent.reset(_episode())
-    agent._reselect(sem_map)
-    assert agent._frontiers == []
-    assert agent._ltg_kind == "look" and 155 <= agent._ltg[1] <= 165 and 100 <= agent._ltg[0] <= 140
-    agent._blocked.append(agent._ltg)  # looked at: the next look goal is elsewhere in that area
-    agent._reselect(sem_map)
-    assert agent._ltg_kind == "look" and np.hypot(*np.subtract(agent._ltg, agent._blocked[0])) > 20
+    agent.explore.reselect(sem_map, agent.goal, agent.rng)
+    assert agent.explore.frontiers == []
+    assert agent.explore.kind == "look" and 155 <= agent.explore.cell[1] <= 165 and 100 <= agent.explore.cell[0] <= 140
+    agent.explore.blocked.append(agent.explore.cell)  # looked at: the next look goal is elsewhere in that area
+    agent.explore.reselect(sem_map, agent.goal, agent.rng)
+    assert agent.explore.kind == "look" and np.hypot(*np.subtract(agent.explore.cell, agent.explore.blocked[0])) > 20
 
 
 def test_a_target_seen_beyond_the_depth_range_is_walked_towards_until_it_maps(env):

@@ -84,3 +84,14 @@ def test_with_frame_changes_only_the_frame():
     small = Config().with_frame(120, 160)
     assert (small.sim.frame_height, small.sim.frame_width) == (120, 160)
     assert dataclasses.replace(small.sim, frame_height=480, frame_width=640) == SimConfig()
+
+
+@pytest.mark.parametrize("setting", [
+    "map.free_space_bins=-1", "agent.blocked_radius_m=0", "agent.candidate_reached_m=-1",
+    "agent.look_around_steps=-1", "agent.escape_after_unreachable=0", "agent.max_reselect=-2",
+    "agent.target_escapes=-1", "agent.commitment_margin=-0.1", "agent.explore_goal_dilation_m=-0.1",
+])
+def test_counts_and_distances_out_of_range_are_one_line_errors_naming_the_field(setting):
+    with pytest.raises(L3MVNError) as err:
+        override(Config(), [setting])
+    assert setting.split(".")[1].split("=")[0] in str(err.value) and "\n" not in str(err.value)

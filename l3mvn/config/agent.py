@@ -78,8 +78,17 @@ class AgentConfig:
             raise L3MVNError("stop distances must satisfy 0 < stop_distance_m <= blocked_stop_distance_m")
         if not 0 < self.look_tolerance_deg < 90.0:
             raise L3MVNError(f"look_tolerance_deg must lie in (0, 90), got {self.look_tolerance_deg}")
-        if self.candidate_views < 0 or self.look_min_area_m2 < 0:
-            raise L3MVNError("candidate_views and look_min_area_m2 must be >= 0")
+        counts = {"look_around_steps": self.look_around_steps, "target_escapes": self.target_escapes,
+                  "max_reselect": self.max_reselect, "candidate_views": self.candidate_views}
+        if bad := {k: v for k, v in counts.items() if v < 0}:
+            raise L3MVNError(f"{', '.join(bad)} must be >= 0, got {', '.join(map(str, bad.values()))}")
+        if self.escape_after_unreachable < 1:
+            raise L3MVNError(f"escape_after_unreachable must be >= 1, got {self.escape_after_unreachable}")
+        lengths = {"blocked_radius_m": self.blocked_radius_m, "candidate_reached_m": self.candidate_reached_m}
+        if bad := {k: v for k, v in lengths.items() if not v > 0}:
+            raise L3MVNError(f"{', '.join(bad)} must be positive, got {', '.join(map(str, bad.values()))}")
+        if self.look_min_area_m2 < 0 or self.commitment_margin < 0 or self.explore_goal_dilation_m < 0:
+            raise L3MVNError("look_min_area_m2, commitment_margin and explore_goal_dilation_m must be >= 0")
         if not 0 < self.frontier_press_m < self.frontier_reached_m:
             raise L3MVNError("frontier_press_m must satisfy 0 < frontier_press_m < frontier_reached_m")
         if not 0 < self.glimpse_min_fraction < self.glimpse_max_fraction <= 1:

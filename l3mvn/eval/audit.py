@@ -4,7 +4,7 @@ An episode only succeeds if the agent, standing in the goal's success region, ha
 well enough for its own confirmation rule. Gaps in the simulated world (an object with no floor near
 it, walled in, lost by the world builder, too thin to map) cap the success rate of every policy, so
 they are measured here, per goal instance, with the agent's own pieces: the renderer, the
-``SemanticMapper`` built as ``MapAgent._update_map`` builds it, and ``MapAgent._target_mask``.
+``SemanticMapper`` built as ``MapAgent._update_map`` builds it, and the agent's ``TargetSearch.mask``.
 
 For each instance (8-connected component of a goal category's footprint) the audit stands the agent
 on a bounded, deterministic sample of walkable cells in the instance's success region (the rule of
@@ -31,7 +31,7 @@ import cv2
 import numpy as np
 from scipy import ndimage as ndi
 
-from l3mvn.agent import MapAgent
+from l3mvn.agent.target import TargetSearch
 from l3mvn.config import Config
 from l3mvn.errors import L3MVNError
 from l3mvn.task.regions import footprint_region
@@ -208,8 +208,7 @@ class FloorAuditor:
         self.full_intr = CameraIntrinsics.from_sim(self.cfg, h, w)
         self.mapper = SemanticMapper.for_sim(self.config.map, self.cfg, h // self.factor, w // self.factor,
                                              scene.categories)
-        self.judge = MapAgent(None, scene.categories, self.config)  # type: ignore[arg-type]
-        self.judge.reset(Episode(0, scene.name, scene.floor, Pose(0.0, 0.0, 0.0), scene.categories[0]))
+        self.judge = TargetSearch(self.config.agent)
         self.walk_labels, _ = ndi.label(scene.walkable, structure=_EIGHT)
         self._mesh_cells = self._mesh_object_cells()
 
@@ -416,9 +415,8 @@ class FloorAuditor:
             return 0, False
         restricted = np.zeros_like(channel)
         restricted[mr0:mr1, mc0:mc1] = crop
-        self.judge.change_target(target.category)
         view = dataclasses.replace(sem_map, categories=restricted[None], category_names=(target.category,))
-        mask, ok = self.judge._target_mask(view)
+        mask, ok = self.judge.mask(view, target.category)
         return (0 if mask is None else int(mask.sum())), ok
 
     def _episode(self, ep: Episode, instances: list[InstanceAudit]) -> EpisodeAudit:

@@ -1,0 +1,85 @@
+"""Action choice of the local policy: the short-term goal along free straight rays, and the turn or
+step towards it.
+
+Kept apart from the distance fields (``goal_field.py``) because it is the part a different robot
+changes (another action set, another turn angle), while the fields stay the same.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from l3mvn.config import PlannerConfig
+from l3mvn.planning.fmm import GeodesicField
+from l3mvn.types import Action
+
+# Directions of the rays that look for the short-term goal (5 degrees apart), sampled every half
+# cell so a ray cannot slip between two diagonal blocked cells.
+_RAY_DIRECTIONS = 72
+_RAY_STEP_CELLS = 0.5
+# Ties between equal distances (every cell inside the dilated goal reads 0; reachable cells
+# equally near an unreachable goal) go to the cell nearest the goal, resp. the agent; the weight is
+# far below one cell so it never overrides a real difference in distance.
+TIE_WEIGHT = 1e-3
+
+
+class Steering:
+    """Short-term goal and discrete action on a distance field (one per planner)."""
+
+    def __init__(self, cfg: PlannerConfig, resolution_m: float) -> None:
+        self.cfg, self.resolution_m = cfg, resolution_m
+        self.lookahead_cells = max(1, int(round(cfg.stg_lookahead_m / resolution_m)))
+        self._ray_rows, self._ray_cols = _rays(self.lookahead_cells)
+
+    def short_term_goal(
+        self, field: GeodesicField, trav: np.ndarray, agent: tuple[int, int], nearest_goal: tuple[int, int]
+    ) -> tuple[int, int]:
+        """The cell nearest the goal among those seen from the agent along free straight rays.
+
+        Only cells that score strictly better than the agent's own count; with none (boxed in, or
+        as near the goal as the free space allows) the short-term goal is the agent's cell.
+        """
+        window = field.window
+        local = (agent[0] - window.r0, agent[1] - window.c0)
+        rows = self._ray_rows + local[0]
+        cols = self._ray_cols + local[1]
+        inside = (rows >= 0) & (rows < window.shape[0]) & (cols >= 0) & (cols < window.shape[1])
+        rows, cols = np.where(inside, rows, 0), np.where(inside, cols, 0)
+        visible = np.logical_and.accumulate(inside & trav[rows, cols], axis=1)
+        tie = TIE_WEIGHT * self.resolution_m
+        score = field.values[rows, cols] + tie * np.hypot(
+            rows + window.r0 - nearest_goal[0], cols + window.c0 - nearest_goal[1]
+        )
+        own = field.values[local] + tie * math.hypot(agent[0] - nearest_goal[0], agent[1] - nearest_goal[1])
+        score = np.where(visible & (score < own), score, np.inf)
+        best = int(np.argmin(score))
+        if not math.isfinite(score.flat[best]):
+            return agent
+        return int(rows.flat[best]) + window.r0, int(cols.flat[best]) + window.c0
+
+    def action(self, agent: tuple[int, int], heading: float, target: tuple[int, int]) -> Action:
+        if target == agent:  # standing on the goal cell itself: any turn is harmless
+            return Action.TURN_LEFT
+        desired = math.atan2(target[0] - agent[0], target[1] - agent[1])
+        error = (desired - heading + math.pi) % (2 * math.pi) - math.pi
+        threshold = math.radians(self.cfg.turn_threshold_deg)
+        if error > threshold:
+            return Action.TURN_LEFT
+        if error < -threshold:
+            return Action.TURN_RIGHT
+        return Action.MOVE_FORWARD
+
+
+def _rays(length_cells: int) -> tuple[np.ndarray, np.ndarray]:
+    """(directions, samples) cell offsets along straight rays from the agent, origin excluded."""
+    angles = np.linspace(0.0, 2 * np.pi, _RAY_DIRECTIONS, endpoint=False)
+    steps = np.arange(_RAY_STEP_CELLS, length_cells + 1e-9, _RAY_STEP_CELLS)
+    rows = np.rint(np.sin(angles)[:, None] * steps[None, :]).astype(np.int64)
+    cols = np.rint(np.cos(angles)[:, None] * steps[None, :]).astype(np.int64)
+    at_origin = (rows == 0) & (cols == 0)
+    # A sample that rounds back onto the agent's cell is not a goal; push it one step out.
+    rows = np.where(at_origin, np.rint(np.sin(angles)[:, None] * 1.0).astype(np.int64), rows)
+    cols = np.where(at_origin, np.rint(np.cos(angles)[:, None] * 1.0).astype(np.int64), cols)
+    return rows, cols
