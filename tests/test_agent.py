@@ -380,3 +380,23 @@ def test_looking_settings_are_checked_with_one_line_errors(env):
         AgentConfig(viewpoint_min_m=2.0, viewpoint_max_m=1.5)
     with pytest.raises(L3MVNError, match="glimpse fractions"):
         AgentConfig(glimpse_min_fraction=0.1, glimpse_max_fraction=0.05)
+
+
+def test_a_kept_frontier_names_why_it_was_chosen_once_not_once_per_keep():
+    """The dashboard showed "kept frontier 1 (commitment): kept frontier 1 (commitment): ..." after
+    two re-selections: the kept reason quoted the previous kept reason."""
+    from l3mvn.agent.exploration import ExplorationGoals
+    from l3mvn.frontiers import Frontier
+    from l3mvn.planning import LocalPlanner
+    from l3mvn.policies.global_policies import Selection
+
+    config = Config()
+    goals = ExplorationGoals(NearestFrontier(), config, LocalPlanner(config.planner, config.map.resolution_m))
+    cells = np.zeros((1, 2), np.int64)
+    goals.frontiers = [Frontier(k, cells, (100, 100 + 40 * k), 5, 1.0, 1.0, 1.0, 0.5) for k in range(2)]
+    goals.cell, goals.frontier, goals.reason = (100, 100), 0, "nearest frontier (1.0 m)"
+    for _ in range(3):
+        sel = goals._commit(Selection(1, (100, 140), np.array([0.5, 0.6]), "nearest frontier (0.9 m)"))
+        assert sel.frontier == 0
+        goals.reason = sel.reason
+    assert goals.reason == "kept frontier 0 (commitment): nearest frontier (1.0 m)"
