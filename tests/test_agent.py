@@ -223,6 +223,7 @@ def test_a_target_behind_a_wall_is_approached_as_the_success_rule_measures(rule)
 @pytest.mark.parametrize(("offset", "stuck", "stops"), [
     ((5, 18), True, True),  # 0.93 m, no way closer: stop
     ((5, 18), False, False),  # 0.93 m, a path closer: walk on
+    ((0, 19), True, True),  # 19 cells: exactly the 0.95 m bound (19 * 0.05 is 0.9500000000000001 in floats)
     ((6, 19), True, False),  # 1.00 m: too far to count, stuck or not
 ])
 def test_a_target_the_agent_cannot_get_closer_to_is_stopped_at_within_the_success_distance(env, offset, stuck, stops):
