@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 FIND_LINKS := $(if $(wildcard /opt/wheels),--find-links /opt/wheels,)
 PIP := $(BIN)/pip install --disable-pip-version-check $(FIND_LINKS)
 
-.PHONY: demo test venv clean
+.PHONY: demo test venv clean habitat
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,13 @@ demo: venv
 
 test: venv
 	HF_HUB_OFFLINE=1 TRANSFORMERS_OFFLINE=1 $(BIN)/python -m pytest -q
+
+# A headless CPU habitat-sim 0.2.2 (~15 min on 2 shared cores, ~1.7 GB) in a cache outside the repository,
+# to check the habitat backend against the real simulator (../shared/tools/habitat_cpu/README.md).
+# Then: --habitat-python $(HABITAT_CACHE)/python; tests/test_habitat_bridge.py finds it there.
+HABITAT_CACHE ?= $(HOME)/.cache/l3mvn/habitat
+habitat:
+	nice -n 19 bash scripts/build_habitat_cpu.sh $(HABITAT_CACHE)
 
 clean:
 	rm -rf $(VENV) .pytest_cache

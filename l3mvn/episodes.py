@@ -52,6 +52,15 @@ def read_episode_file(path: str | Path, floors: dict[int, SceneMap]) -> list[Epi
 
 def _read_records(path: Path) -> list:
     """The ``episodes`` list of a gzip JSON file; every way the file can be unreadable is one line."""
+    data = read_json_gz(path)
+    records = data.get("episodes") if isinstance(data, dict) else None
+    if not isinstance(records, list):
+        raise L3MVNError(f"{path}: expected {{\"episodes\": [...]}}")
+    return records
+
+
+def read_json_gz(path: Path) -> object:
+    """A gzip JSON file (SemExp's and habitat's episode files); every way it can be unreadable is one line."""
     try:
         with gzip.open(path, "rt", encoding="utf-8") as fh:
             data = json.load(fh)
@@ -63,10 +72,7 @@ def _read_records(path: Path) -> list:
         raise L3MVNError(f"{path} is corrupt or truncated ({type(exc).__name__}: {_show(str(exc))})") from None
     except OSError as exc:
         raise L3MVNError(f"{path} cannot be read ({exc.strerror or exc})") from None
-    records = data.get("episodes") if isinstance(data, dict) else None
-    if not isinstance(records, list):
-        raise L3MVNError(f"{path}: expected {{\"episodes\": [...]}}")
-    return records
+    return data
 
 
 def _check_unique_ids(path: Path, episodes: list[Episode]) -> None:

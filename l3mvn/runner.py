@@ -16,6 +16,7 @@ from l3mvn.events import EventBus
 from l3mvn.registry import check_options, make_policy
 from l3mvn.scenes.scene import SceneMap
 from l3mvn.session import EpisodeSession
+from l3mvn.sim.base import Environment
 from l3mvn.sim.simulator import BuiltinSimulator
 from l3mvn.types import Episode
 from l3mvn.task import EpisodeResult, ObjectNavTask
@@ -29,7 +30,7 @@ WARM_FLOORS = 4
 class Floor:
     """One scene floor, ready to run: its simulator, its task, and the policies built for it."""
 
-    env: BuiltinSimulator
+    env: Environment
     task: ObjectNavTask
     policies: dict[str, object] = field(default_factory=dict)
 
@@ -40,7 +41,8 @@ class Runner:
     def __init__(self, config: Config, *, seed: int = 0, config_hash: str = "",
                  warm_floors: int = WARM_FLOORS) -> None:
         self.config, self.seed, self.config_hash = config, seed, config_hash
-        self.warm_floors = warm_floors
+        # A habitat floor is a server process holding a whole scan: one at a time.
+        self.warm_floors = 1 if config.sim.backend == "habitat" else warm_floors
         self._floors: OrderedDict[str, Floor] = OrderedDict()
 
     def floor(self, scene: SceneMap) -> Floor:
@@ -48,10 +50,15 @@ class Runner:
         if scene.key in self._floors:
             self._floors.move_to_end(scene.key)
         else:
-            self._floors[scene.key] = Floor(BuiltinSimulator(scene, self.config.sim), ObjectNavTask(scene, self.config))
+            self._floors[scene.key] = Floor(make_environment(scene, self.config), ObjectNavTask(scene, self.config))
             while len(self._floors) > self.warm_floors:
-                self._floors.popitem(last=False)
+                _close(self._floors.popitem(last=False)[1])
         return self._floors[scene.key]
+
+    def close(self) -> None:
+        """Close every warm floor's environment (a bridge's server process ends with it)."""
+        while self._floors:
+            _close(self._floors.popitem(last=False)[1])
 
     def policy(self, scene: SceneMap, name: str):
         """The warm policy ``name`` on ``scene``'s floor."""
@@ -74,3 +81,19 @@ class Runner:
         session = self.session(scene, policy, bus)
         session.start(episode)
         return session.run()
+
+
+def make_environment(scene: SceneMap, config: Config) -> Environment:
+    """The simulator ``config.sim.backend`` names for one floor: ours in this process, or habitat-sim
+    in the interpreter ``config.sim.habitat_python`` through the bridge (scans only)."""
+    if config.sim.backend == "habitat":
+        from l3mvn.sim.habitat_bridge import habitat_floor_environment
+
+        return habitat_floor_environment(config.sim.habitat_python, scene, config.sim)
+    return BuiltinSimulator(scene, config.sim)
+
+
+def _close(floor: Floor) -> None:
+    close = getattr(floor.env, "close", None)
+    if close is not None:
+        close()

@@ -7,7 +7,12 @@ from dataclasses import dataclass
 
 from l3mvn.errors import L3MVNError
 
-SUCCESS_RULES = ("semexp", "geodesic")
+SUCCESS_RULES = ("semexp", "geodesic", "hm3d", "mp3d")
+# Habitat's ObjectNav rule for HM3D and MP3D episode files: success is standing within
+# ``view_point_distance_m`` (geodesic) of any view point of a goal instance, the positions the file
+# lists from which that instance is in view. It needs view points, so only scans read from such a
+# file have it.
+VIEW_POINT_RULES = ("hm3d", "mp3d")
 
 
 @dataclass(frozen=True)
@@ -17,6 +22,7 @@ class TaskConfig:
 
     success_rule: str = "semexp"
     success_distance_m: float = 1.0
+    view_point_distance_m: float = 0.1
     # The target counts as seen once this share of a frame shows it with valid depth.
     seen_fraction: float = 0.001
     # Forward moves over which the collision rate is measured; at this rate or above a run that ran
@@ -31,6 +37,8 @@ class TaskConfig:
             raise L3MVNError(f"unknown success rule {self.success_rule!r}; choose one of {', '.join(SUCCESS_RULES)}")
         if not (math.isfinite(self.success_distance_m) and self.success_distance_m > 0):
             raise L3MVNError(f"success_distance_m must be a positive finite number, got {self.success_distance_m}")
+        if not (math.isfinite(self.view_point_distance_m) and self.view_point_distance_m > 0):
+            raise L3MVNError(f"view_point_distance_m must be a positive finite number, got {self.view_point_distance_m}")
         if self.collision_window < 1:
             raise L3MVNError(f"collision_window must be >= 1, got {self.collision_window}")
         for name in ("seen_fraction", "stuck_collision_rate", "explored_coverage"):

@@ -8,6 +8,7 @@ in whatever order.
 
 from __future__ import annotations
 
+import atexit
 import os
 import resource
 import socket
@@ -39,11 +40,12 @@ class EvalJob:
     policy: str
     config_hash: str
     record_dir: str | None = None  # write a rerun recording per episode here
+    scenes: str | None = None  # scan root of a habitat ObjectNav dataset (--scenes)
 
     @classmethod
     def create(cls, dataset: str | Path | None, split: str, *, houses: int = 5, episodes_per_house: int = 10,
                seed: int = 0, config: Config | None = None, policy: str,
-               record_dir: str | Path | None = None) -> "EvalJob":
+               record_dir: str | Path | None = None, scenes: str | Path | None = None) -> "EvalJob":
         """A job whose config hash covers the whole config tree, the policy and the seed (recording
         changes no result, so it is not hashed)."""
         config = config or Config()
@@ -52,7 +54,8 @@ class EvalJob:
         # Absolute paths, so workers started elsewhere (Ray) find the same files on a shared disk.
         source = None if dataset is None else str(Path(dataset).resolve())
         record = None if record_dir is None else str(Path(record_dir).resolve())
-        return cls(source, split, houses, episodes_per_house, seed, config, policy, chash, record)
+        scans = None if scenes is None else str(Path(scenes).resolve())
+        return cls(source, split, houses, episodes_per_house, seed, config, policy, chash, record, scans)
 
     def load(self) -> EpisodeSet:
         """The job's episode set, loaded once per process."""
@@ -114,7 +117,8 @@ class _JobState:
         self.job = job
         check_policy(job.policy)
         self.episodes = load_episode_set(job.dataset, job.split, houses=job.houses,
-                                         episodes_per_house=job.episodes_per_house, seed=job.seed, cfg=job.config)
+                                         episodes_per_house=job.episodes_per_house, seed=job.seed, cfg=job.config,
+                                         scenes_dir=job.scenes)
         self.by_key = {ep.key: ep for ep in self.episodes.episodes}
         self.runner = Runner(job.config, seed=job.seed, config_hash=job.config_hash)
 
@@ -151,6 +155,13 @@ _STATES: dict[EvalJob, _JobState] = {}
 
 def _state(job: EvalJob) -> _JobState:
     if job not in _STATES:
-        _STATES.clear()  # one job at a time per process: drop the previous job's worlds
+        _close_states()  # one job at a time per process: drop the previous job's worlds
         _STATES[job] = _JobState(job)
     return _STATES[job]
+
+
+@atexit.register
+def _close_states() -> None:
+    """Close the warm environments (a habitat bridge's server) with the job or the process."""
+    while _STATES:
+        _STATES.popitem()[1].runner.close()

@@ -33,6 +33,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from l3mvn.config import SimConfig
+from l3mvn.scenes.scan import ScanFloor
 from l3mvn.scenes.scene import GOAL_CATEGORIES, SceneMap
 
 _MARGIN_GAP_CELLS = 3.2  # d(object) + d(free) of a ring cell; a 2-cell ring scores 3, a wall >= 4
@@ -159,15 +160,27 @@ def category_profile(name: str) -> _Profile:
     return _Profile(_DEFAULT_PROFILE.kind, _DEFAULT_PROFILE.height, rgb=_name_rgb(key))
 
 
-def build_world(scene: SceneMap, cfg: SimConfig) -> World:
+def build_world(scene: SceneMap, cfg: SimConfig, *, rooms_only: bool = False) -> World:
+    """The scene's 3D world: a scan's own triangles, or the map extruded (see the module docstring).
+
+    ``rooms_only`` lays floor and ceiling only where there is no wall, as a scan has them (the HM3D
+    export: rays down through a wall or outside the house must find no floor); by default both span
+    the whole grid, so a renderer never sees through a gap."""
+    if isinstance(scene, ScanFloor) and scene.mesh is not None:
+        return scan_world(scene)
     res = float(scene.resolution_m)
     top = float(cfg.wall_height_m)
     corridors = view_corridors(scene)
     walls, furniture = wall_grids(scene, corridors)
     mesh = _MeshBuilder(res)
     h, w = scene.shape
-    mesh.horizontal_quad(0.0, 0.0, w * res, h * res, 0.0, up=True, category=0, rgb=_FLOOR_RGB)
-    mesh.horizontal_quad(0.0, 0.0, w * res, h * res, top, up=False, category=0, rgb=_CEILING_RGB)
+    if rooms_only:
+        rooms = _rectangles(~walls) * res
+        mesh._rects(rooms, 0.0, True, 0, _FLOOR_RGB)
+        mesh._rects(rooms, top, False, 0, _CEILING_RGB)
+    else:
+        mesh.horizontal_quad(0.0, 0.0, w * res, h * res, 0.0, up=True, category=0, rgb=_FLOOR_RGB)
+        mesh.horizontal_quad(0.0, 0.0, w * res, h * res, top, up=False, category=0, rgb=_CEILING_RGB)
     # Outside the grid counts as wall, so a free cell on the border is still closed in.
     mesh.prism(walls, 0.0, top, category=0, rgb=_WALL_RGB, outside_solid=True, tops=False, smooth=True)
     mesh.prism(
@@ -177,6 +190,22 @@ def build_world(scene: SceneMap, cfg: SimConfig) -> World:
     for mask, z0, z1, category, rgb in _object_boxes(scene, top, corridors):
         mesh.prism(mask, z0, z1, category=category, rgb=rgb, blocked=walls, bottoms=z0 > 0.0)
     return mesh.build(walls, furniture)
+
+
+def scan_world(scene: ScanFloor) -> World:
+    """A scan floor's triangles as they are (texture colour and category per triangle), shaded by
+    their geometric normals; cells off the free floor count as walls for pose checks."""
+    mesh = scene.mesh
+    assert mesh is not None
+    corners = mesh.vertices[mesh.triangles].astype(np.float64)
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    length = np.linalg.norm(normal, axis=1, keepdims=True)
+    normal = np.where(length > 1e-12, normal / np.maximum(length, 1e-12), (0.0, 0.0, 1.0))
+    return World(
+        vertices=mesh.vertices, triangles=mesh.triangles, tri_category=mesh.tri_category,
+        tri_color=mesh.tri_color, tri_normal=np.ascontiguousarray(normal, np.float32),
+        walls=~scene.free & ~scene.object_any, furniture=np.zeros(scene.shape, bool),
+    )
 
 
 @dataclass(frozen=True, eq=False)

@@ -8,10 +8,13 @@ panel read it; agents never do.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import ndimage as ndi
 
 from l3mvn.config import Config
+from l3mvn.config.task import VIEW_POINT_RULES
 from l3mvn.scenes.scene import SceneMap
 from l3mvn.types import Episode, Pose
 from l3mvn.task.regions import GoalRegion, goal_region
@@ -44,9 +47,17 @@ class ObjectNavTask:
         return self.region(goal).contains(pose.x, pose.y)
 
     def shortest_path_length(self, episode: Episode, goal: str | None = None) -> float:
-        """The ``l`` of SPL from the episode's start (to ``goal``, default the episode's own)."""
+        """The ``l`` of SPL from the episode's start (to ``goal``, default the episode's own).
+
+        Under habitat's view-point rules it is the episode file's ``geodesic_distance`` (habitat's
+        navmesh measured it; ``datasets.geodesic_agreement`` checks it against ours), as long as our
+        grid has a path at all: an episode we cannot walk stays ``no_path``."""
         start = episode.start
-        return self.region(goal or episode.goal).shortest_path_length(start.x, start.y)
+        ours = self.region(goal or episode.goal).shortest_path_length(start.x, start.y)
+        if (self.rule in VIEW_POINT_RULES and goal in (None, episode.goal) and math.isfinite(ours)
+                and math.isfinite(episode.geodesic_distance_m)):
+            return episode.geodesic_distance_m
+        return ours
 
     def reachable_cells(self, start: Pose) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols) of the walkable cells connected to ``start``: the floor an episode can cover."""

@@ -8,6 +8,10 @@ Two rules (``TaskConfig.success_rule``), and every number says which one it used
 * ``geodesic``: success region = traversible cells whose geodesic distance to a goal footprint is
   <= 1.0 m (paths may cross the agent-radius margin around it); the shortest length is the geodesic
   distance to that region.
+* ``hm3d`` / ``mp3d`` (habitat's ObjectNav rule, for scans read from an episode file): success region
+  = traversible cells within 0.1 m (geodesic) of any view point of the goal category; the shortest
+  length is the geodesic distance to the nearest view point (the region's distance + 0.1 m), which
+  is what the file's ``info.geodesic_distance`` holds.
 """
 
 from __future__ import annotations
@@ -20,7 +24,9 @@ import skfmm
 from scipy import ndimage as ndi
 
 from l3mvn.config import Config
+from l3mvn.config.task import VIEW_POINT_RULES
 from l3mvn.errors import L3MVNError
+from l3mvn.scenes.scan import ScanFloor
 from l3mvn.scenes.scene import SceneMap
 
 
@@ -78,6 +84,9 @@ class GoalRegion:
 
 
 def goal_region(scene: SceneMap, goal: str, cfg: Config) -> GoalRegion:
+    if cfg.task.success_rule in VIEW_POINT_RULES:
+        scene.category_mask(goal)  # an unknown category is an error naming the valid ones
+        return view_point_region(scene, goal, cfg)
     footprint = scene.category_mask(goal)
     if not footprint.any():
         raise L3MVNError(
@@ -86,12 +95,45 @@ def goal_region(scene: SceneMap, goal: str, cfg: Config) -> GoalRegion:
     return footprint_region(scene, footprint, cfg, goal)
 
 
+def view_point_region(scene: SceneMap, goal: str, cfg: Config) -> GoalRegion:
+    """Habitat's rule: within ``view_point_distance_m`` of a view point of ``goal`` (see the module
+    docstring). View points off the traversible grid are snapped to the nearest traversible cell
+    within that distance (our grid and habitat's navmesh differ by a cell at walls); farther ones
+    are dropped. No view point on this floor: an empty region (every episode for it is ``no_path``)."""
+    rule, res = cfg.task.success_rule, scene.resolution_m
+    if not isinstance(scene, ScanFloor):
+        raise L3MVNError(f"success rule {rule!r} needs the view points of an ObjectNav episode file; scene "
+                         f"{scene.key} has none: use --rule semexp or geodesic, or a --dataset with --scenes")
+    trav = scene.traversible
+    points = scene.view_points.get(goal, np.zeros((0, 2)))
+    sources = np.zeros(trav.shape, bool)
+    if len(points):
+        rows = np.floor(points[:, 1] / res).astype(np.int64)
+        cols = np.floor(points[:, 0] / res).astype(np.int64)
+        ok = (rows >= 0) & (rows < trav.shape[0]) & (cols >= 0) & (cols < trav.shape[1])
+        sources[rows[ok], cols[ok]] = True
+        off = sources & ~trav
+        if off.any():
+            dist, (near_r, near_c) = ndi.distance_transform_edt(~trav, return_indices=True)
+            snap = off & (dist * res <= cfg.task.view_point_distance_m)
+            sources[near_r[snap], near_c[snap]] = True
+            sources &= trav
+    to_points = geodesic_field(trav, sources, res)
+    region = trav & (to_points <= cfg.task.view_point_distance_m)
+    dist = geodesic_field(trav, region, res)
+    return GoalRegion(goal=goal, rule=rule, region=region & np.isfinite(dist), distance_m=dist,
+                      length_offset_m=cfg.task.view_point_distance_m if region.any() else 0.0, resolution_m=res)
+
+
 def footprint_region(scene: SceneMap, footprint: np.ndarray, cfg: Config, label: str) -> GoalRegion:
     """The success region of any footprint mask under ``cfg.task.success_rule`` (``goal_region`` passes a
     category's; the scene audit passes one instance's); ``label`` names it in the result."""
     res = scene.resolution_m
     trav = scene.traversible
     task = cfg.task
+    if task.success_rule in VIEW_POINT_RULES:
+        raise L3MVNError(f"success rule {task.success_rule!r} judges view points, not object footprints: "
+                         "audit with --rule semexp or geodesic")
     radius = int(round(task.success_distance_m / res))
     if task.success_rule == "semexp":
         # Dilation by a disk = a Euclidean distance threshold (a 41x41 structuring element is slow).

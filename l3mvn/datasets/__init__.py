@@ -1,4 +1,6 @@
-"""Where scenes and episodes come from: a SemExp-format directory, or the built-in procedural houses."""
+"""Where scenes and episodes come from: a SemExp-format directory, an official habitat ObjectNav
+dataset (``objectnav_hm3d`` v1/v2, ``objectnav_mp3d``, Gibson) with its scans, or the built-in
+procedural houses. The format is detected from the files and named in every summary."""
 
 from __future__ import annotations
 
@@ -15,16 +17,19 @@ from l3mvn.scenes.semexp import load_split
 from l3mvn.types import Episode
 
 PROCEDURAL = "procedural"
+SEMEXP = "semexp"
 
 
 @dataclass
 class EpisodeSet:
-    """Scenes of a split and the episodes to run on them, in a fixed order."""
+    """Scenes of a split and the episodes to run on them, in a fixed order; ``format`` names where
+    they came from (``procedural``, ``semexp``, ``objectnav_hm3d_v2``, ...)."""
 
     name: str
     split: str
     scenes: dict[str, dict[int, SceneMap]]
     episodes: list[Episode]
+    format: str = SEMEXP
 
     def scene_of(self, episode: Episode) -> SceneMap:
         return self.scenes[episode.scene][episode.floor]
@@ -38,11 +43,17 @@ def load_episode_set(
     episodes_per_house: int = 10,
     seed: int = 0,
     cfg: Config | None = None,
+    scenes_dir: str | Path | None = None,
 ) -> EpisodeSet:
-    """A SemExp dataset's split with its episode files, or (``dataset=None``) procedural houses with
-    generated episodes, seeded so the same arguments always give the same set."""
+    """A dataset's split with its episodes: SemExp maps, or a habitat ObjectNav dataset whose scans
+    lie under ``scenes_dir``; or (``dataset=None``) procedural houses with generated episodes, seeded
+    so the same arguments always give the same set."""
+    from l3mvn.datasets.objectnav import is_objectnav, load_objectnav
+
     _check_whole("seed", seed, 0)
     if dataset is None:
+        if scenes_dir is not None:
+            raise L3MVNError("--scenes is the scan root of an ObjectNav dataset: give --dataset too")
         _check_whole("--houses", houses, 1)
         _check_whole("--episodes-per-house", episodes_per_house, 1)
         scenes = procedural_split(houses, seed)
@@ -50,9 +61,14 @@ def load_episode_set(
         for name in sorted(scenes):
             for floor in sorted(scenes[name]):
                 episodes += generate_episodes(scenes[name][floor], episodes_per_house, seed=seed, cfg=cfg)
-        return EpisodeSet(PROCEDURAL, split, scenes, episodes)
+        return EpisodeSet(PROCEDURAL, split, scenes, episodes, PROCEDURAL)
+    if is_objectnav(dataset, split):
+        return load_objectnav(dataset, scenes_dir, split, cfg)
+    if scenes_dir is not None:
+        raise L3MVNError(f"--scenes is for habitat ObjectNav datasets (<split>/<split>.json.gz); {dataset} is "
+                         "in SemExp's format, whose maps need no scans")
     scenes = load_split(dataset, split)
-    return EpisodeSet(Path(dataset).resolve().name, split, scenes, read_episodes(dataset, split, scenes))
+    return EpisodeSet(Path(dataset).resolve().name, split, scenes, read_episodes(dataset, split, scenes), SEMEXP)
 
 
 def _check_whole(name: str, value: object, low: int) -> None:
