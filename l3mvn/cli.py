@@ -14,6 +14,8 @@ from pathlib import Path
 from typing import Callable
 
 from l3mvn.config import SUCCESS_RULES, Config, PolicyConfig, TaskConfig, config_dict, config_hash, override
+from l3mvn.config.sim import BACKENDS
+from l3mvn.config.task import VIEW_POINT_RULES
 from l3mvn.errors import L3MVNError, one_line
 
 
@@ -38,8 +40,9 @@ def _positive(text: str) -> int:
 
 
 def _add_sim_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--rule", choices=SUCCESS_RULES, default="semexp",
-                   help="success rule (default: SemExp's Gibson rule, as in the paper's table)")
+    p.add_argument("--rule", choices=SUCCESS_RULES, default=None,
+                   help="success rule (default: the dataset's: habitat's view-point rule for HM3D / MP3D episode "
+                        "files, else SemExp's Gibson rule, as in the paper's table)")
     p.add_argument("--frame", type=_frame, default=None, metavar="HxW",
                    help="render size (default 480x640; 120x160 is what the mapper consumes)")
     p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
@@ -48,7 +51,11 @@ def _add_sim_args(p: argparse.ArgumentParser) -> None:
 
 
 def _add_source_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dataset", default=None, help="SemExp-format dataset directory (default: procedural houses)")
+    p.add_argument("--dataset", default=None,
+                   help="SemExp-format or habitat ObjectNav (objectnav_hm3d v1/v2, objectnav_mp3d) dataset directory "
+                        "(default: procedural houses)")
+    p.add_argument("--scenes", default=None, metavar="DIR",
+                   help="scan root of a habitat ObjectNav --dataset (e.g. data/scene_datasets)")
     p.add_argument("--split", default="val", help="split name inside --dataset (default: val)")
     p.add_argument("--houses", type=_positive, default=5, help="procedural houses when no --dataset (default 5)")
     p.add_argument("--seed", type=int, default=0, help="seed for procedural houses, episodes and policies")
@@ -57,10 +64,22 @@ def _add_source_args(p: argparse.ArgumentParser) -> None:
 def _config(args: argparse.Namespace, policy: PolicyConfig | None = None) -> Config:
     """The config tree from the flags: ``--rule``, ``--frame`` and the policy flags first, then every
     ``--set`` on top (so a ``--set`` wins over the flag it repeats)."""
-    cfg = Config(task=TaskConfig(success_rule=args.rule), policy=policy or PolicyConfig())
+    rule = args.rule
+    if rule is None:
+        from l3mvn.datasets.objectnav import dataset_rule
+
+        rule = dataset_rule(getattr(args, "dataset", None), getattr(args, "split", "val"))
+    cfg = Config(task=TaskConfig(success_rule=rule), policy=policy or PolicyConfig())
     if args.frame:
         cfg = cfg.with_frame(*args.frame)
-    cfg = override(cfg, args.set)
+    backend = [f"sim.backend={args.sim}"] if getattr(args, "sim", None) else []
+    if getattr(args, "habitat_python", None):
+        backend.append(f"sim.habitat_python={args.habitat_python}")
+    cfg = override(cfg, backend + args.set)
+    if cfg.sim.backend == "habitat":
+        from l3mvn.sim.habitat_bridge import habitat_command
+
+        habitat_command(cfg.sim.habitat_python)  # a bad path is one line here, not an error per episode
     cfg.agent.downsample_factor(cfg.sim.frame_height, cfg.sim.frame_width)
     return cfg
 
@@ -73,6 +92,20 @@ class Command:
     help: str
     add_arguments: Callable[[argparse.ArgumentParser], None]
     run: Callable[[argparse.Namespace], int]
+
+
+def _library_commands() -> dict[str, Command]:
+    """Commands whose arguments and run live beside what they drive."""
+    from l3mvn.datasets import hm3d_export
+    from l3mvn.recording import video
+
+    return {
+        "export": Command("write an MP4 (--gif: and a GIF) of a recorded episode, or of the (failed) episodes of "
+                          "a result file", video.add_export_arguments, video.run_export),
+        "export-hm3d": Command("export procedural houses as scans in HM3D's layout, with an objectnav_hm3d_v2 "
+                               "episode file (to run them here and on habitat-sim)", hm3d_export.add_export_arguments,
+                               hm3d_export.run_export),
+    }
 
 
 def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentParser:
@@ -101,8 +134,16 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
                     help="language policies: the paper's bound rule or the official code's thresholds")
     ev.add_argument("--seg-noise", type=float, default=0.0, metavar="P",
                     help="perception errors: per frame and category, miss / mislabel with probability P")
+    ev.add_argument("--sim", choices=BACKENDS, default=None,
+                    help="who moves and renders: builtin (default) or habitat (habitat-sim in --habitat-python, "
+                         "scans only: --dataset with --scenes); same as --set sim.backend=...")
+    ev.add_argument("--habitat-python", default=None, metavar="PATH",
+                    help="the python of the environment that has habitat-sim (`make habitat` builds one into "
+                         "~/.cache/l3mvn/habitat/python)")
     ev.add_argument("--record", action="store_true", help="write a rerun recording per episode to --record-dir")
     ev.add_argument("--record-dir", default="recordings", help="where --record writes (default recordings/)")
+    ev.add_argument("--video", metavar="DIR", default=None,
+                    help="also write an MP4 per episode here, named by outcome (implies --record)")
 
     sc = sub.add_parser("scenes", help="list the scenes and floors of a dataset split, or audit them")
     sc.add_argument("action", nargs="?", choices=["list", "audit"], default="list",
@@ -130,7 +171,7 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
 
     from l3mvn.recording import add_replay_arguments
 
-    for name, command in (extra or {}).items():
+    for name, command in {**_library_commands(), **(extra or {})}.items():
         command.add_arguments(sub.add_parser(name, help=command.help))
     add_replay_arguments(sub.add_parser("replay", help="open a rerun recording (.rrd) in the rerun viewer"))
 
@@ -168,8 +209,9 @@ def main(argv: list[str] | None = None, extra: dict[str, Command] | None = None)
     parser = build_parser(extra)
     args = parser.parse_args(argv)
     try:
-        if extra and args.command in extra:
-            return extra[args.command].run(args)
+        commands = {**_library_commands(), **(extra or {})}
+        if args.command in commands:
+            return commands[args.command].run(args)
         if args.command == "eval":
             return _cmd_eval(args)
         if args.command == "scenes":
@@ -198,12 +240,20 @@ def main(argv: list[str] | None = None, extra: dict[str, Command] | None = None)
     return 2
 
 
-def _scenes(args: argparse.Namespace):
+def _scenes(args: argparse.Namespace, cfg: Config | None = None):
+    """(source, scenes) of the source flags; a habitat ObjectNav dataset loads its scans (``cfg``'s body)."""
+    from l3mvn.datasets import load_episode_set
+    from l3mvn.datasets.objectnav import is_objectnav
     from l3mvn.scenes.procedural import procedural_split
     from l3mvn.scenes.semexp import load_split
 
     if args.dataset is None:
+        if args.scenes is not None:
+            raise L3MVNError("--scenes is the scan root of an ObjectNav dataset: give --dataset too")
         return "procedural", procedural_split(args.houses, args.seed)
+    if args.scenes is not None or is_objectnav(args.dataset, args.split):
+        eset = load_episode_set(args.dataset, args.split, cfg=cfg, scenes_dir=args.scenes)
+        return f"{args.dataset} ({eset.format})", eset.scenes
     return args.dataset, load_split(args.dataset, args.split)
 
 
@@ -316,11 +366,18 @@ def _cmd_eval(args: argparse.Namespace) -> int:
             raise L3MVNError(f"unknown scorer {args.scorer!r}; valid scorers: {', '.join(scorer_names())}")
     cfg = _config(args, PolicyConfig(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise))
     rule = cfg.task.success_rule
+    if cfg.sim.backend == "habitat" and args.scenes is None:
+        raise L3MVNError("--sim habitat runs scans: give --dataset with a habitat ObjectNav dataset and --scenes "
+                         "with its scan root (`l3mvn export-hm3d` writes one from a procedural house)")
     check_resumable(args.out, args.resume)
     job = EvalJob.create(args.dataset, args.split, houses=args.houses, episodes_per_house=args.episodes_per_house,
                          seed=args.seed, config=cfg, policy=args.policy,
-                         record_dir=args.record_dir if args.record else None)
+                         record_dir=args.record_dir if args.record or args.video else None, scenes=args.scenes)
     eset = job.load()
+    if rule in VIEW_POINT_RULES:
+        from l3mvn.datasets.objectnav import geodesic_report
+
+        print(geodesic_report(eset, cfg), file=sys.stderr)
     episodes = eset.episodes[: args.episodes] if args.episodes else eset.episodes
     wanted = {ep.key for ep in episodes}
     errors, interrupted = 0, False
@@ -335,7 +392,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         else:
             results = {}
         todo = [ep.key for ep in episodes if ep.key not in results]
-        print(f"{eset.name}/{eset.split}: {len(episodes)} episodes, {len(todo)} to run, policy {args.policy}, "
+        print(f"{eset.name}/{eset.split} ({eset.format}): {len(episodes)} episodes, {len(todo)} to run, "
+              f"policy {args.policy}, "
               f"rule {rule}, config {job.config_hash}", file=sys.stderr)
         if args.backend == "ray":
             from l3mvn.eval.ray_backend import run_ray
@@ -354,6 +412,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
                         bar.write(f"{row.get('key')}: error: {problem}")
                         continue
                     results[row["key"]] = row
+                    if args.video:
+                        _episode_video(row, args, bar)
                     done = list(results.values())
                     bar.set_postfix_str(f"SR {sum(r['success'] for r in done) / len(done):.3f} "
                                         f"SPL {sum(r['spl'] or 0 for r in done) / len(done):.3f}")
@@ -370,10 +430,22 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         print(f"interrupted: summary of the {len(results)} of {len(episodes)} episodes finished "
               f"(saved in {args.out or 'no file: add --out'}; --resume runs the rest)", file=sys.stderr)
     summary = summarize(list(results.values()))
+    summary["dataset"] = {"name": eset.name, "split": eset.split, "format": eset.format}
+    print(f"dataset: {eset.name}/{eset.split}, format {eset.format}")
     print(format_summary(summary))
     if args.json:
         print(json.dumps(_json_safe(summary), sort_keys=True))
     return 130 if interrupted else 0
+
+
+def _episode_video(row: dict, args: argparse.Namespace, bar) -> None:
+    """``eval --video``: the finished episode's recording as an MP4 (a local run's recordings only)."""
+    from l3mvn.recording.video import export_result_video
+
+    try:
+        export_result_video(row, args.record_dir, args.video)
+    except L3MVNError as exc:
+        bar.write(f"{row['key']}: no video: {one_line(exc)}")
 
 
 def _progress(total: int):
@@ -497,7 +569,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         out, fmt = checked_out(args.out)
     except OSError as exc:  # a parent that is a file, a name too long, no permission
         raise L3MVNError(f"--out {args.out}: cannot write there ({exc.strerror or exc})") from None
-    source, scenes = _scenes(args)
+    source, scenes = _scenes(args, Config(sim=cfg))
     name = args.scene or sorted(scenes)[0]
     scene = pick_floor(scenes, name, args.floor, where=str(source))
     world = build_world(scene, cfg)

@@ -31,7 +31,34 @@ _NAMED_RGB: dict[str, tuple[int, int, int]] = {
     "vase": (120, 60, 160),
     "cup": (255, 200, 120),
     "bottle": (0, 140, 130),
+    # The other categories of the procedural houses, each picked greedily as far as possible (CIELAB)
+    # from every colour above and from the map's greys, so no two swatches read alike.
+    "bathtub": (0, 0, 255),
+    "shower": (0, 255, 0),
+    "towel": (120, 15, 60),
+    "dresser": (255, 0, 135),
+    "side table": (30, 75, 0),
+    "desk": (15, 0, 165),
+    "coffee table": (135, 135, 0),
+    "tv stand": (255, 165, 255),
+    "shelving unit": (180, 255, 75),
+    "counter": (0, 15, 75),
+    "lamp": (195, 0, 255),
+    "microwave": (0, 255, 195),
+    "toaster": (120, 0, 0),
+    "coffee machine": (0, 255, 120),
+    "garbage can": (0, 90, 150),
+    "laptop": (135, 90, 255),
+    "laundry hamper": (120, 150, 90),
 }
+
+# For names not listed: the next colours of the same greedy pick (a hue from a name hash gave
+# dozens of near-identical blues and greens).
+_SPARE_RGB: tuple[tuple[int, int, int], ...] = (
+    (180, 90, 150), (195, 165, 210), (15, 165, 210), (240, 165, 0), (180, 255, 225), (195, 15, 75),
+    (135, 180, 0), (90, 60, 105), (75, 30, 15), (165, 105, 105), (75, 195, 150), (0, 0, 105),
+    (0, 75, 60), (180, 135, 255), (0, 195, 0), (225, 105, 90),
+)
 
 # Turbo-like anchor colours (near, ..., far) for depth.
 _DEPTH_ANCHORS = np.array(
@@ -42,16 +69,11 @@ _DEPTH_ANCHORS = np.array(
 
 
 def category_color(name: str) -> tuple[int, int, int]:
-    """A fixed colour for a category name; unknown names get a bright colour from a name hash."""
+    """A fixed colour for a category name; names not listed get a spare distinct colour by name hash."""
     key = name.strip().lower().replace("_", " ").replace("-", " ")
     if key in _NAMED_RGB:
         return _NAMED_RGB[key]
-    h = zlib.crc32(key.encode())
-    hue = (h % 360) / 60.0
-    sat, val = 0.55 + 0.4 * ((h >> 9) % 64) / 63.0, 0.7 + 0.3 * ((h >> 15) % 64) / 63.0
-    x = 1.0 - abs(hue % 2.0 - 1.0)
-    rgb = [(1, x, 0), (x, 1, 0), (0, 1, x), (0, x, 1), (x, 0, 1), (1, 0, x)][int(hue) % 6]
-    return tuple(int(round(255 * val * (1.0 - sat + sat * c))) for c in rgb)  # type: ignore[return-value]
+    return _SPARE_RGB[zlib.crc32(key.encode()) % len(_SPARE_RGB)]
 
 
 def category_palette(categories: tuple[str, ...]) -> np.ndarray:

@@ -21,6 +21,7 @@ from l3mvn.recording import (
     Recorder, add_replay_arguments, list_recordings, open_recording, parse_recording_name, read_recording,
     recording_path, run_replay,
 )
+from l3mvn.recording.layout import LABELLED_FRONTIERS
 from l3mvn.runner import Runner
 from l3mvn.types import Action
 
@@ -96,8 +97,54 @@ def test_map_agent_episode_records_map_frontiers_goal_and_trajectory(tiny_scene,
     assert open_recording(recorder.path).blueprints()  # the default layout travels with the file
     assert recorder.path == tmp_path / "tiny-ds_Tiny_0_frontier.rrd"
     labels = _values(recorder.path, "/map/frontiers", "Points2D:labels")
-    assert labels and all(re.fullmatch(r"\*?#\d+ LLM \S+ CU \d\.\d\d F \S+", label) for label in labels)
-    assert any(label.startswith("*") for label in labels)  # the chosen frontier is marked
+    assert labels and all(re.fullmatch(r"(★?F\d+ (fused|LLM|CU) \d\.\d\d)?", label) for label in labels)
+    assert any(label.startswith("★") for label in labels)  # the chosen frontier is marked
+    assert len(_values(recorder.path, "/map/frontiers", "score_cu")) == len(labels)  # every score on hover
+
+
+def _rows(path, entity, column):
+    """Each logged row of one component column of one entity, in step order."""
+    out = []
+    for chunk in RrdReader(path).stream():
+        batch = chunk.to_record_batch()
+        if chunk.entity_path == entity and column in batch.schema.names:
+            steps = batch.column("step").to_pylist() if "step" in batch.schema.names else [None] * batch.num_rows
+            out += [(s, v) for s, v in zip(steps, batch.column(column).to_pylist()) if v is not None]
+    return [v for _, v in sorted(out, key=lambda sv: -1 if sv[0] is None else sv[0])]
+
+
+def test_only_the_best_three_frontiers_and_the_chosen_one_are_labelled_and_scores_are_series(tiny_scene, tmp_path):
+    runner = Runner(CONFIG.replace(agent=AgentConfig(look_around_steps=2)))
+    recorder, _, _ = _record(runner, tiny_scene, "cost-utility", tmp_path)
+    rows = zip(_rows(recorder.path, "/map/frontiers", "Points2D:labels"),
+               _rows(recorder.path, "/map/frontiers", "score_cu"), _rows(recorder.path, "/map/frontiers", "chosen"))
+    for labels, scores, chosen in rows:
+        best = set(np.argsort(-np.array(scores), kind="stable")[:LABELLED_FRONTIERS].tolist())
+        assert {i for i, label in enumerate(labels) if label} == best | {i for i, c in enumerate(chosen) if c}
+    names = _rows(recorder.path, "/metrics/frontier_scores", "SeriesLines:names")[-1]
+    series = _rows(recorder.path, "/metrics/frontier_scores", "Scalars:scalars")
+    frontiers = _rows(recorder.path, "/metrics/frontiers", "Scalars:scalars")
+    assert names[:2] == ["F0", "F1"] and series
+    skipped = frontiers[: len(frontiers) - len(series)]  # before the first frontier there is no line to log
+    assert all(count == 0 for (count,) in skipped)
+    for row, (count,) in zip(series, frontiers[len(skipped):]):  # a value per frontier of the step, gaps for others
+        assert sum(np.isfinite(v) for v in row) == count
+    assert _rows(recorder.path, "/metrics/chosen_frontier", "SeriesLines:names")[-1] == ["LLM", "CU", "fused"]
+
+
+def test_the_target_is_boxed_on_the_map_and_the_view_is_fitted_to_the_mapped_area(tiny_scene, tmp_path):
+    runner = Runner(CONFIG.replace(sim=dataclasses.replace(CONFIG.sim, max_steps=60),
+                                   agent=AgentConfig(look_around_steps=2)))
+    recorder, _, _ = _record(runner, tiny_scene, "frontier", tmp_path)
+    boxes = _rows(recorder.path, "/map/target", "Boxes2D:labels")
+    assert boxes and boxes[-1][0] == "target: toilet"
+    ranges = [c for bp in open_recording(recorder.path).blueprints()
+              for chunk in RrdReader(recorder.path).stream(store=bp)
+              if "VisualBounds2D:range" in chunk.to_record_batch().schema.names
+              for c in chunk.to_record_batch().column("VisualBounds2D:range").to_pylist() if c]
+    final = ranges[-1][0]  # sent at the end: the house mapped (<= 10 x 5 m at 5 cm), with a margin
+    assert 0 < final["x_range"][1] - final["x_range"][0] <= 200 * 1.2 + 1
+    assert 0 < final["y_range"][1] - final["y_range"][0] <= 200 * 1.2 + 1
 
 
 def test_two_recordings_written_concurrently_stay_separate(tiny_scene, tmp_path):

@@ -27,8 +27,8 @@ def recording_path(recordings_dir: str | Path, dataset: str | Path, scene: str, 
                    policy: str) -> Path:
     """``<dir>/<dataset>_<scene>_<episode>_<policy>.rrd``; a dataset path contributes its folder name,
     and anything but letters, digits, '.' and '-' becomes '-' so the name parses back unambiguously."""
-    parts = [_name_part(Path(str(dataset)).name or str(dataset)), _name_part(scene), str(int(episode_id)),
-             _name_part(policy)]
+    parts = [recording_name_part(Path(str(dataset)).name or str(dataset)), recording_name_part(scene),
+             str(int(episode_id)), recording_name_part(policy)]
     return Path(recordings_dir) / ("_".join(parts) + ".rrd")
 
 
@@ -76,7 +76,14 @@ def list_recordings(recordings_dir: str | Path) -> list[RecordingInfo]:
     return sorted(out, key=lambda r: (-r.mtime, r.path.name))
 
 
-def _name_part(text: str) -> str:
+def find_recording(recordings_dir: str | Path, scene: str, episode_id: int, policy: str) -> Path | None:
+    """The newest recording of (scene, episode, policy) in the folder, whatever its dataset; None if none."""
+    want = (recording_name_part(scene), int(episode_id), recording_name_part(policy))
+    return next((r.path for r in list_recordings(recordings_dir) if (r.scene, r.episode_id, r.policy) == want), None)
+
+
+def recording_name_part(text: str) -> str:
+    """``text`` as a part of a file name: anything but letters, digits, '.' and '-' becomes '-'."""
     part = _NAME_PART.sub("-", str(text)).strip("-")
     if not part:
         raise L3MVNError(f"cannot name a recording after {text!r}: it needs a letter or digit")

@@ -10,15 +10,22 @@ from pathlib import Path
 
 import numpy as np
 import rerun as rr
+from scipy import ndimage as ndi
 
 from l3mvn.errors import L3MVNError, first_line
 from l3mvn.events import EventBus, StepEvent
 from l3mvn.recording.catalogue import APPLICATION_ID, TIMELINE, recording_path
-from l3mvn.recording.layout import default_blueprint
+from l3mvn.recording.layout import (
+    AGENT_RGB, GOAL_RGB, LABELLED_FRONTIERS, TARGET_RGB, MapBounds, default_blueprint, map_view_bounds, score_colors,
+)
 from l3mvn.types import Episode
 from l3mvn.viz import BACKGROUND_RGB, category_palette
 
 log = logging.getLogger(__name__)
+
+_GOAL_ARM_CELLS = 5.0  # half the size of the goal's cross on the map
+_TARGET_MERGE_M = 0.5  # target fragments on the map closer than this share one box
+_TARGET_MERGE_PX = 3  # and in the camera frame
 
 # Map classes before the categories, SemExp's visualisation colours (unexplored is white).
 _MAP_CLASSES = (
@@ -27,10 +34,6 @@ _MAP_CLASSES = (
     ("obstacle", (150, 150, 150)),
     ("visited", (245, 92, 66)),
 )
-_LOW_SCORE_RGB = np.array([220, 50, 50], np.float32)
-_HIGH_SCORE_RGB = np.array([40, 190, 80], np.float32)
-_AGENT_RGB = (30, 120, 255)
-_GOAL_RGB = (255, 0, 200)
 
 
 class Recorder:
@@ -67,6 +70,10 @@ class Recorder:
         self._cleared: dict[str, bool] = {}
         self._last_event_t: float | None = None
         self._series: dict[str, list[str]] = {}
+        self._map_box: tuple[int, int, int, int] | None = None  # rows r0..r1, cols c0..c1 ever mapped
+        self._view: MapBounds | None = None
+        self._resolution_m = 0.0
+        self._last_target: tuple = ()
         self.log_ms: list[float] = []  # this recorder's own cost per event, for budgets and benchmarks
 
     @classmethod
@@ -147,16 +154,19 @@ class Recorder:
         rec.log("camera/rgb", rr.Image(obs.rgb))
         rec.log("camera/depth", rr.DepthImage(obs.depth, meter=1.0, colormap="turbo"))
         rec.log("camera/semantic", rr.SegmentationImage(_small_ids(obs.semantic)))
+        self._log_camera_target(obs, ev.goal)
 
         self._log_world(ev)
         self._log_metrics(ev)
         decision = ev.decision
         if decision is not None:
             if decision.map is not None:
-                self._log_map(decision)
+                self._log_map(decision, ev.goal)
             self._log_decision(ev)
         if ev.done:
             self._log_result(ev)
+            if self._map_box is not None:
+                self._fit_view(self._map_box, self._resolution_m, final=True)
 
     def _log_camera_context(self, categories: tuple[str, ...]) -> None:
         palette = category_palette(categories)
@@ -188,13 +198,13 @@ class Recorder:
         rec, pose = self._rec, ev.pose
         if not self._world_xyz:
             rec.log("world/agent/body", rr.Arrows3D(origins=[[0.0, 0.0, 0.3]], vectors=[[0.4, 0.0, 0.0]],
-                                                    colors=[_AGENT_RGB]), static=True)
+                                                    colors=[AGENT_RGB]), static=True)
         rec.log("world/agent", rr.Transform3D(translation=[pose.x, pose.y, 0.0],
                                               rotation=rr.RotationAxisAngle(axis=[0, 0, 1], radians=pose.heading)))
         here = (pose.x, pose.y, 0.05)
         if not self._world_xyz or self._world_xyz[-1] != here:
             self._world_xyz.append(here)
-            rec.log("world/trajectory", rr.LineStrips3D([self._world_xyz], colors=[_AGENT_RGB]))
+            rec.log("world/trajectory", rr.LineStrips3D([self._world_xyz], colors=[AGENT_RGB]))
 
     def _log_metrics(self, ev: StepEvent) -> None:
         now = time.perf_counter()
@@ -206,8 +216,17 @@ class Recorder:
             timings.update(ev.decision.timings_ms)
             if ev.decision.map is not None:
                 self._rec.log("metrics/frontiers", rr.Scalars([float(len(ev.decision.frontiers))]))
+                self._log_frontier_scores(ev.decision)
         self._log_series("metrics/ground_truth", ev.ground_truth)
         self._log_series("metrics/timings_ms", timings)
+
+    def _log_frontier_scores(self, d) -> None:
+        """Each frontier's score (the one its colour shows) as a line named like its map label, F<id>,
+        and the chosen frontier's LLM, CU and fused scores: how the decision margin evolves."""
+        self._log_series("metrics/frontier_scores", {f"F{f.id}": _score(f) for f in d.frontiers})
+        chosen = next((f for f in d.frontiers if f.id == d.chosen_frontier), None)
+        parts = {} if chosen is None else {"LLM": chosen.s_llm, "CU": chosen.s_cu, "fused": chosen.fused}
+        self._log_series("metrics/chosen_frontier", {k: math.nan if v is None else v for k, v in parts.items()})
 
     def _log_series(self, entity: str, values: dict[str, float]) -> None:
         """One entity, one named line per key: a key's line index never changes, a missing value is
@@ -221,31 +240,95 @@ class Recorder:
             row = [float(values.get(k, math.nan)) for k in keys]
             self._rec.log(entity, rr.Scalars([v if math.isfinite(v) else math.nan for v in row]))
 
-    def _log_map(self, d) -> None:
+    def _log_map(self, d, goal: str) -> None:
         rec, m = self._rec, d.map
         if self._map_categories != tuple(m.category_names):
             self._log_map_context(tuple(m.category_names))
             self._last_map_ids = None
-        ids = _map_ids(m)
+        ids, box = _map_ids(m)
         if self._last_map_ids is None or not np.array_equal(ids, self._last_map_ids):
             rec.log("map/semantic", rr.SegmentationImage(ids))
             self._last_map_ids = ids
+        if box is not None:
+            self._fit_view(box, m.resolution_m, final=False)
+        self._log_target(m, goal)
 
         r, c = m.agent_cell
         here = (c + 0.5, r + 0.5)
         if not self._map_xy or self._map_xy[-1] != here:
             self._map_xy.append(here)
-            rec.log("map/trajectory", rr.LineStrips2D([self._map_xy], colors=[_AGENT_RGB], radii=[0.6]))
+            rec.log("map/trajectory", rr.LineStrips2D([self._map_xy], colors=[AGENT_RGB], radii=[0.6]))
         heading = (math.cos(m.agent_heading) * 8.0, math.sin(m.agent_heading) * 8.0)
-        rec.log("map/agent", rr.Points2D([here], colors=[_AGENT_RGB], radii=[3.0]),
-                rr.Arrows2D(origins=[here], vectors=[heading], colors=[_AGENT_RGB]))
+        rec.log("map/agent", rr.Points2D([here], colors=[AGENT_RGB], radii=[3.0]),
+                rr.Arrows2D(origins=[here], vectors=[heading], colors=[AGENT_RGB]))
 
-        self._log_point("map/goal", d.long_term_goal, 4.0, _GOAL_RGB, f"goal ({d.goal_kind})")
+        self._log_goal(d)
         self._log_point("map/short_term_goal", d.short_term_goal, 2.0, (255, 160, 0), None)
         self._log_frontiers(d.frontiers, d.chosen_frontier)
         if d.long_term_goal is not None:
             gx, gy = m.cell_to_world(*d.long_term_goal)
-            rec.log("world/goal", rr.Points3D([[gx, gy, 0.1]], colors=[_GOAL_RGB], radii=[0.15]))
+            rec.log("world/goal", rr.Points3D([[gx, gy, 0.1]], colors=[GOAL_RGB], radii=[0.15]))
+
+    def _fit_view(self, box: tuple[int, int, int, int], resolution_m: float, *, final: bool) -> None:
+        """Fit the map view to what is mapped: re-sent when the mapped area outgrows the view, and
+        once at the end, so a replay opens on the whole explored house, not the 48 m map frame."""
+        self._resolution_m = resolution_m
+        r0, r1, c0, c1 = box
+        if self._map_box is not None:
+            pr0, pr1, pc0, pc1 = self._map_box
+            r0, r1, c0, c1 = min(r0, pr0), max(r1, pr1), min(c0, pc0), max(c1, pc1)
+        self._map_box = (r0, r1, c0, c1)
+        view = self._view
+        if final or view is None or c0 < view.x0 or c1 > view.x1 or r0 < view.y0 or r1 > view.y1:
+            self._view = map_view_bounds(self._map_box, resolution_m, final=final)
+            self._rec.send_blueprint(default_blueprint(self._view), make_active=True, make_default=True)
+
+    def _log_target(self, m, goal: str) -> None:
+        """A box around every blob of the target category on the map (one label, the target's name)."""
+        merge = int(round(_TARGET_MERGE_M / m.resolution_m))
+        boxes = _blob_boxes(m.categories[m.category_names.index(goal)], merge) if goal in m.category_names else ()
+        if boxes == self._last_target:
+            return
+        self._last_target = boxes
+        if not boxes:
+            self._clear("map/target")
+            return
+        self._cleared["map/target"] = False
+        mins = [(c0, r0) for r0, r1, c0, c1 in boxes]
+        sizes = [(c1 - c0, r1 - r0) for r0, r1, c0, c1 in boxes]
+        labels = [f"target: {goal}"] + [""] * (len(boxes) - 1)
+        self._rec.log("map/target", rr.Boxes2D(mins=mins, sizes=sizes, colors=[TARGET_RGB], radii=[0.8],
+                                               labels=labels, show_labels=True))
+
+    def _log_camera_target(self, obs, goal: str) -> None:
+        """The target's pixels boxed in the RGB and semantic frames (what the detector reports)."""
+        mask = obs.semantic == obs.categories.index(goal) + 1 if goal in obs.categories else None
+        boxes = () if mask is None else _blob_boxes(mask, _TARGET_MERGE_PX)
+        for entity in ("camera/rgb/target", "camera/semantic/target"):
+            if not boxes:
+                self._clear(entity)
+                continue
+            self._cleared[entity] = False
+            self._rec.log(entity, rr.Boxes2D(mins=[(c0, r0) for r0, r1, c0, c1 in boxes],
+                                             sizes=[(c1 - c0, r1 - r0) for r0, r1, c0, c1 in boxes],
+                                             colors=[TARGET_RGB], radii=[1.0],
+                                             labels=[goal] + [""] * (len(boxes) - 1), show_labels=True))
+
+    def _log_goal(self, d) -> None:
+        """The long-term goal as a cross drawn above the frontiers (it sits on the chosen one), labelled
+        with its kind unless it is that frontier (whose label says so)."""
+        if d.long_term_goal is None:
+            self._clear("map/goal")
+            return
+        self._cleared["map/goal"] = False
+        x, y = d.long_term_goal[1] + 0.5, d.long_term_goal[0] + 0.5
+        arm = _GOAL_ARM_CELLS
+        label = None if d.chosen_frontier is not None else f"goal ({d.goal_kind})"
+        self._rec.log("map/goal", rr.Points2D([(x, y)], colors=[GOAL_RGB], radii=[1.2], draw_order=41,
+                                              labels=[label] if label else None),
+                      rr.LineStrips2D([[(x - arm, y - arm), (x + arm, y + arm)],
+                                       [(x - arm, y + arm), (x + arm, y - arm)]],
+                                      colors=[GOAL_RGB], radii=[0.8], draw_order=40))
 
     def _log_point(self, entity: str, cell, radius: float, rgb, label: str | None) -> None:
         if cell is None:
@@ -263,11 +346,18 @@ class Recorder:
             return
         self._cleared["map/frontiers"] = self._cleared["map/frontier_cells"] = False
         centers = np.array([(f.center[1] + 0.5, f.center[0] + 0.5) for f in frontiers], np.float32)
-        colors = _score_colors(np.array([_score(f) for f in frontiers], np.float32))
+        scores = np.array([_score(f) for f in frontiers], np.float32)
+        colors = score_colors(scores)
         radii = [4.0 if f.id == chosen else 2.5 for f in frontiers]
-        labels = [_frontier_label(f, f.id == chosen) for f in frontiers]
+        top = set(np.argsort(-scores, kind="stable")[:LABELLED_FRONTIERS].tolist())
+        labels = [_frontier_label(f, f.id == chosen) if i in top or f.id == chosen else ""
+                  for i, f in enumerate(frontiers)]
         self._rec.log("map/frontiers", rr.Points2D(centers, colors=colors, radii=radii, labels=labels,
-                                                   show_labels=True))
+                                                   show_labels=True),
+                      rr.AnyValues(frontier_id=np.array([f.id for f in frontiers], np.int32),
+                                   score_llm=_scores(frontiers, "s_llm"), score_cu=_scores(frontiers, "s_cu"),
+                                   score_fused=_scores(frontiers, "fused"),
+                                   chosen=np.array([f.id == chosen for f in frontiers])))
         cells = np.concatenate([f.cells for f in frontiers])[:, ::-1].astype(np.float32) + 0.5
         cell_colors = np.repeat(colors, [len(f.cells) for f in frontiers], axis=0)
         self._rec.log("map/frontier_cells", rr.Points2D(cells, colors=cell_colors, radii=[0.5]))
@@ -277,7 +367,7 @@ class Recorder:
                 for name, query in f.queries.items():
                     score = f.llm_scores.get(name)
                     tail = "" if score is None else f" -> {score:.3f}"
-                    self._rec.log("log/language", rr.TextLog(f"frontier #{f.id} [{name}] {query}{tail}"))
+                    self._rec.log("log/language", rr.TextLog(f"F{f.id} [{name}] {query}{tail}"))
         self._last_queries = queries
 
     def _log_decision(self, ev: StepEvent) -> None:
@@ -286,7 +376,7 @@ class Recorder:
         if d.goal_kind:
             parts.append(f"[{d.goal_kind}]")
         if d.chosen_frontier is not None:
-            parts.append(f"frontier #{d.chosen_frontier}")
+            parts.append(f"F{d.chosen_frontier}")
         if d.reason:
             parts.append(d.reason)
         if d.override:
@@ -317,8 +407,9 @@ def _small_ids(ids: np.ndarray) -> np.ndarray:
     return ids.astype(np.uint8) if ids.size and int(ids.max()) < 256 else ids.astype(np.uint16)
 
 
-def _map_ids(m) -> np.ndarray:
-    """(M, M) class ids of the map: unexplored 0, explored 1, obstacle 2, visited 3, category k at 4 + k.
+def _map_ids(m) -> tuple[np.ndarray, tuple[int, int, int, int] | None]:
+    """(M, M) class ids of the map: unexplored 0, explored 1, obstacle 2, visited 3, category k at 4 + k;
+    and the box painted (rows r0..r1, cols c0..c1, end exclusive; None while nothing is mapped).
 
     Only the bounding box of what is mapped is painted (views, no copies of the K x M x M stack), so
     a 720x720 map with 15 categories costs well under a millisecond.
@@ -329,7 +420,7 @@ def _map_ids(m) -> np.ndarray:
     present = np.flatnonzero(cat_rows.any(axis=1))
     rows = np.flatnonzero(m.explored.any(axis=1) | cat_rows.any(axis=0))
     if rows.size == 0:
-        return ids
+        return ids, None
     r0, r1 = rows[0], rows[-1] + 1
     band = (slice(r0, r1),)
     cols = np.flatnonzero(m.explored[band].any(axis=0) | m.categories[:, r0:r1].any(axis=(0, 1)))
@@ -341,27 +432,48 @@ def _map_ids(m) -> np.ndarray:
     window[m.visited[box]] = 3
     for k in present:
         window[m.categories[k][box]] = n + k
-    return ids
+    return ids, (int(r0), int(r1), int(c0), int(c1))
+
+
+def _blob_boxes(mask: np.ndarray, merge: int) -> tuple[tuple[int, int, int, int], ...]:
+    """(r0, r1, c0, c1), end exclusive, around each group of ``mask``'s cells, cells closer than
+    ``merge`` joining one group (a mapped bed is a scatter of fragments: one box, not twenty).
+    Searched in the mask's bounding box only (a target is a few hundred cells of a 960 x 960 map)."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if rows.size == 0:
+        return ()
+    cols = np.flatnonzero(mask[rows[0]:rows[-1] + 1].any(axis=0))
+    r0, c0 = int(rows[0]), int(cols[0])
+    window = mask[r0:rows[-1] + 1, c0:cols[-1] + 1]
+    grown = ndi.binary_dilation(window, iterations=merge) if merge > 0 else window
+    labels, _ = ndi.label(grown, structure=np.ones((3, 3), bool))
+    labels[~window] = 0  # each box spans the group's own cells, not the dilation
+    return tuple((r0 + s[0].start, r0 + s[0].stop, c0 + s[1].start, c0 + s[1].stop)
+                 for s in ndi.find_objects(labels) if s is not None)
+
+
+def _scores(frontiers: list, field: str) -> np.ndarray:
+    return np.array([math.nan if getattr(f, field) is None else float(getattr(f, field)) for f in frontiers],
+                    np.float32)
+
+
+def _scored(f) -> tuple[str, float]:
+    """The score a frontier is drawn by and its name: fused, else LLM, else CU (0 when none is finite)."""
+    for kind, value in (("fused", f.fused), ("LLM", f.s_llm), ("CU", f.s_cu)):
+        if value is not None and math.isfinite(value):
+            return kind, float(value)
+    return "CU", 0.0
 
 
 def _score(f) -> float:
-    for value in (f.fused, f.s_llm, f.s_cu):
-        if value is not None and math.isfinite(value):
-            return float(value)
-    return 0.0
-
-
-def _score_colors(scores: np.ndarray) -> np.ndarray:
-    t = np.clip(scores, 0.0, 1.0)[:, None]
-    return (_LOW_SCORE_RGB * (1 - t) + _HIGH_SCORE_RGB * t).astype(np.uint8)
+    return _scored(f)[1]
 
 
 def _frontier_label(f, chosen: bool) -> str:
-    def num(v):
-        return "-" if v is None else f"{v:.2f}"
-
-    mark = "*" if chosen else ""
-    return f"{mark}#{f.id} LLM {num(f.s_llm)} CU {num(f.s_cu)} F {num(f.fused)}"
+    """``F<id> <score>``, the dashboard's name, ★ when chosen; the score named is the one the colour
+    shows (fused, else LLM, else CU); every score is on the point's hover (its ``score_*`` values)."""
+    kind, value = _scored(f)
+    return f"{'★' if chosen else ''}F{f.id} {kind} {value:.2f}"
 
 
 def _fmt(v) -> str:

@@ -1,0 +1,200 @@
+"""``l3mvn export``: a video read back from a real recording decodes with one frame per step."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from l3mvn.config import Config, SimConfig
+from l3mvn.episodes import generate_episodes
+from l3mvn.errors import L3MVNError
+from l3mvn.events import EventBus
+from l3mvn.recording import Recorder, read_recording
+from l3mvn.recording.video import (
+    VideoOptions, add_export_arguments, frames, export_result_video, export_video, read_episode, result_video_name,
+    run_export,
+)
+from l3mvn.runner import Runner
+from l3mvn.scenes.procedural import generate_house
+
+MAX_STEPS = 24
+CONFIG = Config(sim=dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=MAX_STEPS))
+
+
+@pytest.fixture(scope="module")
+def house():
+    return generate_house(3)
+
+
+def _record(folder, scene, policy):
+    episode = generate_episodes(scene, 1, seed=3, goals=("toilet",))[0]
+    bus = EventBus()
+    recorder = Recorder.for_episode(folder, "procedural", episode, policy).attach(bus)
+    result = Runner(CONFIG).run(scene, episode, policy, bus)
+    return recorder.path, result
+
+
+@pytest.fixture(scope="module")
+def recorded(house, tmp_path_factory):
+    """A real frontier-agent episode on a procedural house, recorded by the real recorder."""
+    return _record(tmp_path_factory.mktemp("recordings"), house, "frontier")
+
+
+def _decode(path):
+    cap = cv2.VideoCapture(str(path))
+    frames = []
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        frames.append(frame[..., ::-1])
+    cap.release()
+    return frames
+
+
+def test_the_mp4_has_the_title_card_then_one_frame_per_step_at_the_stated_size(recorded, tmp_path):
+    path, result = recorded
+    steps = read_recording(path).steps
+    assert steps == tuple(range(result.steps + 1))  # the reset is step 0
+    options = VideoOptions(fps=5, height=240, title_s=1.0)
+
+    video = export_video(path, tmp_path / "ep.mp4", options)
+
+    frames = _decode(video.path)
+    assert video.title_frames == 5 and video.steps == len(steps)
+    assert len(frames) == video.frames == 5 + len(steps)
+    assert {f.shape for f in frames} == {(video.height, video.width, 3)}
+    assert video.height == 240 + 56  # the panels, then the text band
+    assert 320 + 6 + 0.75 * 240 <= video.width <= 320 + 6 + 1.6 * 240 + 1  # 4:3 camera, the map at its aspect
+    title, first_step = frames[0].astype(int), frames[5].astype(int)
+    banner = title[5: video.height // 4 - 5, :].reshape(-1, 3).mean(axis=0)
+    failed = result.success == 0.0
+    assert (banner[0] > banner[1] + 60) == failed and (banner[1] > banner[0] + 60) == (not failed)  # red / green
+    assert all(np.abs(f.astype(int) - title).mean() < 4 for f in frames[:5])  # the card is held
+    assert np.abs(first_step - title).mean() > 20  # then the steps begin
+
+
+def test_each_step_frame_shows_that_steps_map_and_camera(recorded, tmp_path):
+    path, _ = recorded
+    ep = read_episode(path)
+    assert ep.policy == "frontier" and ep.scene == "procedural-0003" and ep.steps[0].goal == "toilet"
+    assert ep.result["failure"] and ep.outcome in {"success", f"fail_{ep.result['failure']}"}
+    assert [s.step for s in ep.steps] == list(read_recording(path).steps)
+    assert all(s.decision for s in ep.steps)
+    mapped = [int((s.map_ids[2] > 0).sum()) for s in ep.steps if s.map_ids is not None]
+    assert mapped[-1] > mapped[0]  # the map grows as the agent explores
+    assert any(s.frontiers is not None and any(s.frontiers.labels) for s in ep.steps)
+
+    options = VideoOptions(height=240, title_s=0)
+    decoded = _decode(export_video(path, tmp_path / "ep.mp4", options).path)[1:]
+    drawn = list(frames(ep, options, title_frames=0))
+    assert len(decoded) == len(drawn) == len(ep.steps)
+    assert max(np.abs(a.astype(int) - b).mean() for a, b in zip(decoded, drawn)) < 6  # what was drawn, per step
+    first, last = drawn[0][:240, 326:].astype(int), drawn[-1][:240, 326:].astype(int)
+    assert np.abs(last - first).mean() > 5  # the map panel shows the map of its own step
+
+
+def test_a_gif_is_written_beside_the_mp4(recorded, tmp_path):
+    from PIL import Image
+
+    path, _ = recorded
+    video = export_video(path, tmp_path / "ep.mp4", VideoOptions(height=160), gif=True)
+    assert video.gif == tmp_path / "ep.gif"
+    with Image.open(video.gif) as gif:
+        assert gif.n_frames == 1 + video.steps and gif.size == (video.width, video.height)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: d / "absent.rrd", r"absent.rrd not found"),
+    (lambda d: (d / "junk.rrd").write_bytes(b"not rerun at all") and d / "junk.rrd",
+     "junk.rrd is not a readable rerun"),
+])
+def test_bad_recordings_are_one_line_errors(tmp_path, make, message):
+    with pytest.raises(L3MVNError, match=message) as err:
+        export_video(make(tmp_path), tmp_path / "x.mp4")
+    assert "\n" not in str(err.value)
+
+
+def test_a_recording_without_a_map_is_refused_naming_the_policy(house, tmp_path):
+    path, _ = _record(tmp_path, house, "oracle")
+    with pytest.raises(L3MVNError, match=r"holds no map \(oracle keeps none\)") as err:
+        export_video(path, tmp_path / "x.mp4")
+    assert "\n" not in str(err.value)
+
+
+def test_bad_options_and_names_are_one_line_errors(recorded, tmp_path):
+    with pytest.raises(L3MVNError, match="must end in .mp4"):
+        export_video(recorded[0], tmp_path / "x.avi")
+    with pytest.raises(L3MVNError, match="--fps must lie"):
+        VideoOptions(fps=0)
+    with pytest.raises(L3MVNError, match="--height must lie"):
+        VideoOptions(height=10)
+
+
+def _row(path, **kw):
+    ep = read_episode(path)
+    row = {"key": f"{ep.scene}/0/{ep.episode_id}", "scene": ep.scene, "episode_id": int(ep.episode_id),
+           "policy": ep.policy, "success": 0.0, "failure": "unseen_in_explored"}
+    return {**row, **kw}
+
+
+def test_a_result_line_finds_its_recording_and_is_named_by_outcome(recorded, tmp_path):
+    path, _ = recorded
+    video = export_result_video(_row(path), path.parent, tmp_path)
+    assert video.path == tmp_path / "fail_unseen_in_explored_procedural-0003_0.mp4"
+    assert result_video_name(_row(path, success=1.0, failure="success")) == "success_procedural-0003_0.mp4"
+    with pytest.raises(L3MVNError, match="no recording of procedural-0003 episode 0 \\(cost-utility\\)"):
+        export_result_video(_row(path, policy="cost-utility"), path.parent, tmp_path)
+
+
+def _cli(*argv):
+    """``l3mvn export ARGV`` as the CLI runs it: 0, or 2 with a one-line ``error:`` (``main``'s contract)."""
+    parser = argparse.ArgumentParser(prog="l3mvn export")
+    add_export_arguments(parser)
+    try:
+        return run_export(parser.parse_args(list(argv)))
+    except L3MVNError as exc:
+        print(f"error: {exc}", file=sys.stderr)  # unflattened: the test checks it is one line
+        return 2
+
+
+def test_the_export_command_single_and_batch(recorded, tmp_path, capsys):
+    path, _ = recorded
+    assert _cli(str(tmp_path / "one.mp4"), "--recording", str(path), "--height", "160") == 0
+    assert "one.mp4: " in capsys.readouterr().out and (tmp_path / "one.mp4").stat().st_size > 0
+
+    results = tmp_path / "results.jsonl"
+    rows = [_row(path), _row(path, scene="elsewhere", key="elsewhere/0/0"), _row(path, success=1.0, failure="success",
+                                                                               key="ok")]
+    results.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    out = tmp_path / "videos"
+    assert _cli("--results", str(results), "--recordings", str(path.parent), "--out", str(out),
+                "--failures", "--height", "160") == 0
+    assert sorted(p.name for p in out.iterdir()) == ["fail_unseen_in_explored_procedural-0003_0.mp4"]
+    captured = capsys.readouterr()
+    assert "skipped elsewhere/0/0: no recording" in captured.err and "wrote 1 videos" in captured.out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["x.mp4"], "export needs VIDEO.mp4 --recording"),
+    (["--results", "r.jsonl"], "--results needs --recordings"),
+    (["x.mp4", "--recording", "r.rrd", "--out", "d"], "go with --results"),
+    (["--results", "absent.jsonl", "--recordings", ".", "--out", "d"], "results file absent.jsonl not found"),
+])
+def test_bad_export_flags_are_one_line_cli_errors(argv, message, capsys):
+    assert _cli(*argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and message in err and err.count("\n") == 1
+
+
+def test_a_malformed_result_file_names_its_line(recorded, tmp_path, capsys):
+    bad = tmp_path / "r.jsonl"
+    bad.write_text('{"scene": "a", "success": 0}\n{oops\n')
+    assert _cli("--results", str(bad), "--recordings", str(tmp_path), "--out", str(tmp_path / "o")) == 2
+    assert "r.jsonl line 2 is not JSON" in capsys.readouterr().err
