@@ -7,7 +7,9 @@ scene's ground-truth grid (marked as such). Either way the result is a ``MapView
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from app.state import Cell, FrontierMarker, MapView
@@ -21,12 +23,19 @@ FREE = (226, 226, 220)
 GLIMPSED = (170, 170, 160)  # explored only from afar (SemanticMap.looked): what the agent may go look at
 OBSTACLE = (112, 112, 124)
 TRAJECTORY = (10, 10, 10)
+# The target's cells get a white ring inside a black one: one of them shows on any background.
+TARGET_RINGS = ((255, 255, 255), (0, 0, 0))
+# Ground truth drawn over the map on demand (RGBA): what the agent does not know.
+GT_FLOOR = (60, 140, 255, 90)
+GT_REGION = (0, 210, 90, 150)
+GT_GOAL = (255, 0, 200, 255)
 MARGIN_CELLS = 24
 TARGET_PIXELS = 640
 
 
-def agent_map_view(decision: Decision) -> MapView:
-    """The agent's SemanticMap, cropped to the explored bounding box plus a margin."""
+def agent_map_view(decision: Decision, target: str = "") -> MapView:
+    """The agent's SemanticMap, cropped to the explored bounding box plus a margin; ``target``'s
+    cells ringed."""
     m = decision.map
     frontiers = tuple(_marker(f, i == decision.chosen_frontier) for i, f in enumerate(decision.frontiers))
     extra = [m.agent_cell, decision.long_term_goal, decision.short_term_goal, *(f.cell for f in frontiers)]
@@ -37,25 +46,28 @@ def agent_map_view(decision: Decision) -> MapView:
     img[m.explored[rows, cols]] = FREE
     img[m.explored[rows, cols] & ~m.looked[rows, cols]] = GLIMPSED
     img[m.obstacle[rows, cols]] = OBSTACLE
-    _paint_categories(img, m.categories[:, rows, cols], m.category_names)
+    shown = _paint_categories(img, m.categories[:, rows, cols], m.category_names, target)
     img[m.visited[rows, cols]] = TRAJECTORY
     scale = _scale(img.shape)
+    half = m.size // 2
     return MapView(
         image=_upscale(img, scale), origin=(r0, c0), scale=scale, grid_shape=(m.size, m.size),
+        world_origin=(m.start_xy[0] + (0.5 - half) * m.resolution_m, m.start_xy[1] + (0.5 - half) * m.resolution_m),
         resolution_m=m.resolution_m, source="agent map", agent_cell=tuple(m.agent_cell),
         agent_heading=m.agent_heading, long_term_goal=_cell(decision.long_term_goal),
         short_term_goal=_cell(decision.short_term_goal), goal_kind=decision.goal_kind,
-        override=decision.override, frontiers=frontiers, legend=tuple(legend(m.category_names)),
+        override=decision.override, frontiers=frontiers, legend=tuple(legend(shown)), target=target,
     )
 
 
-def ground_truth_view(scene: SceneMap, trajectory: list[Pose], decision: Decision | None = None) -> MapView:
+def ground_truth_view(scene: SceneMap, trajectory: list[Pose], decision: Decision | None = None,
+                      target: str = "") -> MapView:
     """The scene's ground-truth floor plan with the walked path: for policies without a map."""
     h, w = scene.shape
     img = np.empty((h, w, 3), np.uint8)
     img[:] = UNEXPLORED
     img[scene.free] = FREE
-    _paint_categories(img, scene.objects, scene.categories)
+    shown = _paint_categories(img, scene.objects, scene.categories, target)
     cells = np.array([scene.cell_of(p.x, p.y) for p in trajectory], dtype=np.int64).reshape(-1, 2)
     inside = (cells[:, 0] >= 0) & (cells[:, 0] < h) & (cells[:, 1] >= 0) & (cells[:, 1] < w)
     img[cells[inside, 0], cells[inside, 1]] = TRAJECTORY
@@ -63,10 +75,54 @@ def ground_truth_view(scene: SceneMap, trajectory: list[Pose], decision: Decisio
     scale = _scale(img.shape)
     return MapView(
         image=_upscale(img, scale), origin=(0, 0), scale=scale, grid_shape=(h, w),
+        world_origin=(0.5 * scene.resolution_m, 0.5 * scene.resolution_m),
         resolution_m=scene.resolution_m, source="ground truth", agent_cell=scene.cell_of(pose.x, pose.y),
         agent_heading=pose.heading, goal_kind=decision.goal_kind if decision else "",
-        override=decision.override if decision else None, legend=tuple(legend(scene.categories)),
+        override=decision.override if decision else None, legend=tuple(legend(shown)), target=target,
     )
+
+
+@dataclass(frozen=True, eq=False)
+class GroundTruthLayer:
+    """The scene's truth in ``view``'s cells: RGBA ``image`` over cells ``origin .. origin + cells``."""
+
+    image: np.ndarray
+    origin: Cell
+    cells: Cell
+    goal_cell: Cell | None  # a cell of the nearest true goal instance, for its label
+
+
+def ground_truth_layer(view: MapView, scene: SceneMap, success_region: np.ndarray, target: str) -> GroundTruthLayer:
+    """The whole floor plan, the success region and the true instances of ``target``, resampled
+    into the grid ``view`` is drawn in (the agent's map is offset from the scene's grid by its start)."""
+    res = view.resolution_m
+    h, w = scene.shape
+    x0, y0 = view.world_origin
+    # The scene's extent in view cells, then each view cell's centre back in scene cells.
+    r0, c0 = math.floor((0.0 - y0) / res), math.floor((0.0 - x0) / res)
+    r1, c1 = math.ceil((h * scene.resolution_m - y0) / res), math.ceil((w * scene.resolution_m - x0) / res)
+    rows, cols = np.arange(r0, r1), np.arange(c0, c1)
+    sr = np.floor((y0 + rows * res) / scene.resolution_m).astype(np.int64)
+    sc = np.floor((x0 + cols * res) / scene.resolution_m).astype(np.int64)
+    ok_r, ok_c = (sr >= 0) & (sr < h), (sc >= 0) & (sc < w)
+
+    def sample(mask: np.ndarray) -> np.ndarray:
+        out = np.zeros((len(rows), len(cols)), bool)
+        out[np.ix_(ok_r, ok_c)] = mask[np.ix_(sr[ok_r], sc[ok_c])]
+        return out
+
+    goal = sample(scene.category_mask(target)) if target in scene.categories else np.zeros((len(rows), len(cols)), bool)
+    img = np.zeros((len(rows), len(cols), 4), np.uint8)
+    img[sample(scene.free)] = GT_FLOOR
+    img[sample(success_region)] = GT_REGION
+    img[goal] = GT_GOAL
+    goal_cells = np.argwhere(goal)
+    goal_cell = None
+    if goal_cells.size:
+        agent = np.array(view.agent_cell) - (r0, c0)
+        r, c = goal_cells[int(np.argmin(((goal_cells - agent) ** 2).sum(axis=1)))]
+        goal_cell = (int(r) + r0, int(c) + c0)
+    return GroundTruthLayer(_upscale(img, view.scale), (r0, c0), (len(rows), len(cols)), goal_cell)
 
 
 def score_color(score: float | None) -> tuple[int, int, int]:
@@ -105,11 +161,21 @@ def _bbox(explored: np.ndarray, extra: list, height: int, width: int) -> tuple[i
     return r0, r1, c0, c1
 
 
-def _paint_categories(img: np.ndarray, cats: np.ndarray, names: tuple[str, ...]) -> None:
-    """Last category wins where several overlap; goal categories come first in both our grids."""
+def _paint_categories(img: np.ndarray, cats: np.ndarray, names: tuple[str, ...], target: str = "") -> tuple[str, ...]:
+    """Paint every category present and ring ``target``'s cells; returns the names painted (the
+    legend lists only what the map shows). Last category wins where several overlap; goal
+    categories come first in both our grids."""
     palette = category_palette(names)
-    for k in np.flatnonzero(cats.reshape(len(names), -1).any(axis=1)):
+    present = np.flatnonzero(cats.reshape(len(names), -1).any(axis=1))
+    for k in present:
         img[cats[k]] = palette[k + 1]
+    if target in names and cats[names.index(target)].any():
+        mask = cats[names.index(target)].astype(np.uint8)
+        inner = cv2.dilate(mask, np.ones((3, 3), np.uint8)).astype(bool)
+        outer = cv2.dilate(mask, np.ones((5, 5), np.uint8)).astype(bool)
+        img[outer & ~inner] = TARGET_RINGS[1]
+        img[inner & ~mask.astype(bool)] = TARGET_RINGS[0]
+    return tuple(names[k] for k in present)
 
 
 def _scale(shape: tuple[int, ...]) -> int:

@@ -9,6 +9,8 @@ on serving.
 
 from __future__ import annotations
 
+import functools
+import itertools
 import logging
 import math
 import queue
@@ -20,18 +22,20 @@ from pathlib import Path
 from typing import Callable
 
 from app.map_image import agent_map_view, ground_truth_view
+from app.model_weights import scorer_problems
 from app.state import Cell, Frames, Metrics, Notice, Snapshot
 from l3mvn.config import Config, config_hash
 from l3mvn.datasets import EpisodeSet
 from l3mvn.errors import L3MVNError
 from l3mvn.events import EventBus, StepEvent
+from l3mvn.agent.teleop import TeleopAgent
 from l3mvn.registry import (
-    DIRECT_POLICIES, LANGUAGE_POLICIES, POLICY_NAMES, check_policy,
+    DIRECT_POLICIES, LANGUAGE_POLICIES, POLICY_NAMES, TELEOP, check_policy,
 )
 from l3mvn.scenes.scene import GOAL_CATEGORIES
 from l3mvn.runner import Runner
 from l3mvn.session import EpisodeSession, Steerable
-from l3mvn.types import Episode, Pose
+from l3mvn.types import Action, Episode, Pose
 from l3mvn.viz import colorize_depth, colorize_semantic
 
 log = logging.getLogger(__name__)
@@ -69,12 +73,17 @@ class DashboardController:
         self._lock = threading.Lock()
         self._running = False
         self._reset_pending = False
+        self._run_queued = False
+        self._busy: dict[int, str] = {}  # jobs on the worker that hold the controls, oldest first
+        self._job_ids = itertools.count()
+        self._current_job: int | None = None
         self._steps_pending = 0
         self._speed = _clamp_speed(steps_per_second)
         self._seq = 0
         self._snapshot = Snapshot(seq=0, policy=self.policy_name, running=False,
                                   steps_per_second=self._speed, metrics=Metrics(),
                                   note="Pick an episode and press Reset.")
+        self.unavailable_scorers = scorer_problems()
         self._snapshot_fns: list[Callable[[Snapshot], None]] = []
         self._notice_fns: list[Callable[[Notice], None]] = []
         self._closed = threading.Event()
@@ -124,16 +133,23 @@ class DashboardController:
         return self._speed
 
     # --- commands (validate now, work on the worker) -----------------------------------------
-    def reset(self, scene_key: str, episode_id: int, *, client_id: int | None = None) -> None:
+    def reset(self, scene_key: str, episode_id: int, *, client_id: int | None = None,
+              then_run: bool = False) -> None:
+        """Start ``episode_id`` of ``scene_key`` on the worker; ``then_run`` queues a Run after it."""
         episode = self._find_episode(scene_key, episode_id)
         with self._lock:
             if self._reset_pending:
                 raise L3MVNError("a reset is already in progress (maybe from another tab); wait for it")
-            self._reset_pending, self._running = True, False
-        self._submit("reset", lambda: self._do_reset(episode), client_id)
+            self._reset_pending, self._running, self._run_queued = True, False, then_run
+        self._submit("reset", lambda: self._do_reset(episode), client_id, busy=f"resetting to episode {episode.key}")
 
     def step(self, *, client_id: int | None = None) -> None:
         with self._lock:
+            if self._session is None and not self._reset_pending:
+                raise L3MVNError("no episode yet: pick one and press Reset (or Run, which starts it)")
+            if self._session is not None and isinstance(self._session.policy, TeleopAgent) and not self._reset_pending:
+                raise L3MVNError(f"Step does not apply to policy {TELEOP!r}: drive with the arrow keys / WASD "
+                                 "or the Drive buttons")
             if self._running:
                 raise L3MVNError("Step is disabled while Run is active: press Pause first")
             if self._steps_pending >= MAX_QUEUED_STEPS:
@@ -141,8 +157,40 @@ class DashboardController:
             self._steps_pending += 1
         self._submit("step", self._do_step, client_id)
 
+    def drive(self, action: str, *, client_id: int | None = None) -> None:
+        """One step with ``action`` chosen by hand (policy ``teleop`` only), queued like Step."""
+        session = self._require_running_episode()
+        if not isinstance(session.policy, TeleopAgent):
+            raise L3MVNError(f"Drive moves the agent under policy {TELEOP!r} only (the episode runs "
+                             f"{session.policy_name!r}): pick Policy {TELEOP} and press Reset")
+        chosen = Action.parse(action)
+        with self._lock:
+            if self._running:
+                raise L3MVNError("Drive is disabled while Run is active: press Pause first")
+            if self._steps_pending >= MAX_QUEUED_STEPS:
+                raise L3MVNError(f"{self._steps_pending} steps are already queued: the agent is busy")
+            self._steps_pending += 1
+
+        def drive_one() -> None:
+            current = self._require_running_episode()
+            current.policy.drive(chosen)
+            current.step()
+
+        self._submit("step", drive_one, client_id)
+
     def run(self, *, client_id: int | None = None) -> None:
-        self._require_running_episode()
+        """Step on a timer; during a reset, queued to start when it ends (a press is never lost)."""
+        with self._lock:
+            queued = self._reset_pending
+            self._run_queued = self._run_queued or queued
+        if queued:
+            self._notify("Run queued: it starts as soon as the reset finishes", client_id=client_id)
+            self._publish()
+            return
+        session = self._require_running_episode()
+        if isinstance(session.policy, TeleopAgent):
+            raise L3MVNError(f"Run does not apply to policy {TELEOP!r}: drive with the arrow keys / WASD or the "
+                             "Drive buttons")
         with self._lock:
             self._running = True
         self._publish(note="running")
@@ -150,7 +198,10 @@ class DashboardController:
     def pause(self, *, client_id: int | None = None) -> None:
         with self._lock:
             was, self._running = self._running, False
-        if was:
+            queued, self._run_queued = self._run_queued, False
+        if queued:
+            self._notify("the queued Run is cancelled: the episode stays at step 0", client_id=client_id)
+        if was or queued:
             self._publish(note="paused")
 
     def set_speed(self, steps_per_second: float) -> None:
@@ -159,17 +210,27 @@ class DashboardController:
     def set_policy(self, name: str, *, client_id: int | None = None) -> None:
         self.policy_name = check_policy(name)
         self._notify(f"policy {name!r} takes effect on the next Reset", client_id=client_id)
+        self._publish()  # the page says what the chosen policy will show (a map or not)
 
     def set_scorer(self, name: str, *, client_id: int | None = None) -> None:
+        """Swap the language scorer; one whose weights are not on disk is refused at once, by name."""
         names = (DEFAULT_SCORER,) + self.scorer_names()
         if name not in names:
             raise L3MVNError(f"unknown scorer {name!r}; valid scorers: {', '.join(names)}")
+        if name in self.unavailable_scorers:
+            usable = ", ".join(n for n in names if n not in self.unavailable_scorers)
+            raise L3MVNError(f"scorer {name!r} is unavailable: {self.unavailable_scorers[name]}; usable: {usable}")
         if name == DEFAULT_SCORER:
             self.scorer = None
             self._notify("the policy's own scorer returns on the next Reset", client_id=client_id)
             return
         self.scorer = name
-        self._submit("scorer", self._apply_scorer, client_id)
+        session = self._session
+        if session is None or session.policy_name not in LANGUAGE_POLICIES:
+            self._notify(f"scorer {name!r} takes effect when a language policy runs "
+                         f"({', '.join(LANGUAGE_POLICIES)})", client_id=client_id)
+            return
+        self._submit("scorer", self._apply_scorer, client_id, busy=f"loading the language scorer {name!r}")
 
     def set_record(self, on: bool, *, client_id: int | None = None) -> None:
         self.record = on
@@ -221,9 +282,26 @@ class DashboardController:
         self._stop_recorder()
 
     # --- worker ------------------------------------------------------------------------------
-    def _submit(self, what: str, fn: Callable[[], None], client_id: int | None) -> None:
+    def _submit(self, what: str, fn: Callable[[], None], client_id: int | None, *, busy: str = "") -> None:
+        """Queue ``fn`` for the worker; ``busy`` names a job that holds the controls until it ends."""
         self._idle.clear()
+        if busy:
+            with self._lock:
+                job = next(self._job_ids)
+                self._busy[job] = busy
+            self._publish()
+            fn = functools.partial(self._held, job, fn)
         self._queue.put((what, fn, client_id))
+
+    def _held(self, job: int, fn: Callable[[], None]) -> None:
+        """Run a controls-holding job; when it ends (or fails) the page gets its controls back."""
+        self._current_job = job
+        try:
+            fn()
+        finally:
+            with self._lock:
+                self._busy.pop(job, None)
+                self._current_job = None
 
     def _loop(self) -> None:
         next_step = time.monotonic()
@@ -242,28 +320,40 @@ class DashboardController:
                 self._idle.set()
 
     def _guarded(self, what: str, fn: Callable[[], None], client_id: int | None) -> None:
+        """Run one worker job; whatever it raises becomes a notice that stays until dismissed (the
+        request was accepted earlier, so the user may have looked away) and the snapshot's error.
+        Every job but a plain step ends with a snapshot, so the page never keeps a stale busy state."""
+        failed = True
         try:
             fn()
+            failed = False
         except L3MVNError as exc:
             self._running = False
-            self._notify(f"{what}: {exc}", level="warning", client_id=client_id)
+            self._notify(f"{what}: {exc}", level="warning", client_id=client_id, sticky=True, title="Request failed")
             self._publish(error=str(exc))
         except Exception as exc:  # the page must stay up whatever the agent does
             log.exception("dashboard %s failed", what)
             self._running = False
-            self._notify(f"{what} failed: {type(exc).__name__}: {exc}", level="error")
+            self._notify(f"{what} failed: {type(exc).__name__}: {exc}", level="error", sticky=True)
             self._publish(error=f"{what} failed: {type(exc).__name__}: {exc}")
         finally:
+            queued = False
             with self._lock:
                 if what == "reset":
                     self._reset_pending = False
+                    queued, self._run_queued = self._run_queued, False
+                    self._running = queued and not failed and not isinstance(self._session.policy, TeleopAgent)
                 elif what == "step":
                     self._steps_pending -= 1
+            if queued and failed:
+                self._notify("the queued Run is cancelled: the reset failed", level="warning", client_id=client_id)
+            if failed or what not in ("step", "run"):  # a step's own event already drew it
+                self._publish(note="running" if self._running else self._snapshot.note)
 
     def _do_reset(self, episode: Episode) -> None:
         scene = self.episodes.scene_of(episode)
         if self.policy_name in LANGUAGE_POLICIES and self.policy_name not in self._runner.floor(scene).policies:
-            self._notify(f"loading the language model of {self.policy_name} (a few seconds, once)")
+            self._set_busy(f"loading the language model of {self.policy_name} (a few seconds, once)")
         # The same hash ``l3mvn eval`` writes for these settings, so dashboard runs can be matched.
         scorer = self.scorer if self.policy_name in LANGUAGE_POLICIES else None
         chash = config_hash(self.cfg.replace(policy=replace(self.cfg.policy, scorer=scorer)),
@@ -276,6 +366,14 @@ class DashboardController:
             self._start_recorder(episode)
         self._trajectory = []
         self._session.start(episode)
+
+    def _set_busy(self, text: str) -> None:
+        """Say more about the controls-holding job in progress (what takes long inside it)."""
+        with self._lock:
+            job = self._current_job
+            if job in self._busy:
+                self._busy[job] = f"{self._busy[job]}: {text}"
+        self._publish()
 
     def _do_step(self) -> None:
         session = self._require_running_episode()
@@ -316,7 +414,7 @@ class DashboardController:
         try:
             session.set_scorer(self.scorer)
         except L3MVNError as exc:
-            self._notify(str(exc), level="warning")
+            self._notify(str(exc), level="warning", sticky=True, title="Scorer not applied")
 
     def _start_recorder(self, episode: Episode) -> None:
         from l3mvn.recording import Recorder
@@ -338,9 +436,9 @@ class DashboardController:
         self._trajectory.append(event.pose)
         decision = event.decision
         if decision is not None and decision.map is not None:
-            view = agent_map_view(decision)
+            view = agent_map_view(decision, target=event.goal)
         elif session.policy_name in DIRECT_POLICIES:
-            view = ground_truth_view(session.task.scene, self._trajectory, decision)
+            view = ground_truth_view(session.task.scene, self._trajectory, decision, target=event.goal)
         else:
             view = None  # a map-based agent before its first step
         if decision is not None and decision.goal_kind == "manual" and decision.override:
@@ -348,8 +446,13 @@ class DashboardController:
         elif decision is not None and self._manual is not None and decision.goal_kind not in ("manual", ""):
             self._manual = None  # the policy dropped it: reached or cleared
         metrics = self._snapshot.metrics
+        if event.done:
+            with self._lock:
+                self._running = False  # this step's snapshot is the last: it must not say "running"
         if event.done and event.result is not None:
             metrics = metrics.add(event.result)
+            self._notify(_outcome(event), level="info" if event.result.get("success") else "warning", sticky=True,
+                         title="Episode over")
         self._publish(event=event, frames=self._frames(event), map=view, metrics=metrics,
                       episode_id=session.episode.episode_id, scene=session.task.scene.key,
                       note="", error=None, stepped_at=stepped_at)
@@ -366,9 +469,12 @@ class DashboardController:
     def _publish(self, **changes) -> None:
         with self._lock:
             self._seq += 1
-            snap = replace(self._snapshot, seq=self._seq, running=self._running, policy=self.policy_name,
+            # The policy of the episode shown (the dropdown's choice waits for the next Reset).
+            policy = self._session.policy_name if self._session is not None else self.policy_name
+            snap = replace(self._snapshot, seq=self._seq, running=self._running, policy=policy,
                            steps_per_second=self._speed, manual_goal=self._manual,
-                           segment_note=self._segment_note, **changes)
+                           segment_note=self._segment_note, busy="; ".join(self._busy.values()),
+                           run_queued=self._run_queued, **changes)
             self._snapshot = snap
         for fn in list(self._snapshot_fns):
             try:
@@ -376,8 +482,9 @@ class DashboardController:
             except Exception:
                 log.exception("dashboard view failed on snapshot %d", snap.seq)
 
-    def _notify(self, text: str, *, level: str = "info", client_id: int | None = None) -> None:
-        notice = Notice(text=text, level=level, client_id=client_id)
+    def _notify(self, text: str, *, level: str = "info", client_id: int | None = None, sticky: bool = False,
+                title: str = "") -> None:
+        notice = Notice(text=text, level=level, client_id=client_id, sticky=sticky, title=title)
         for fn in list(self._notice_fns):
             try:
                 fn(notice)
@@ -399,6 +506,13 @@ class DashboardController:
         if session.done:
             raise L3MVNError(f"episode {session.episode.key} is over: press Reset to start another")
         return session
+
+
+def _outcome(event: StepEvent) -> str:
+    """One line for the end of an episode: what happened, in the units the paper reports."""
+    r = event.result or {}
+    verdict = "SUCCESS" if r.get("success") else f"FAILURE ({r.get('failure') or 'not reached'})"
+    return f"episode {event.episode_key}: {verdict}, SPL {float(r.get('spl', 0.0)):.2f}, {r.get('steps')} steps"
 
 
 def _clamp_speed(value: float) -> float:

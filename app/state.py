@@ -60,7 +60,9 @@ class MapView:
     goal_kind: str = ""
     override: str | None = None
     frontiers: tuple[FrontierMarker, ...] = ()
-    legend: tuple[tuple[str, tuple[int, int, int]], ...] = ()
+    legend: tuple[tuple[str, tuple[int, int, int]], ...] = ()  # the categories the image shows
+    target: str = ""  # the goal category, ringed on the image
+    world_origin: tuple[float, float] = (0.0, 0.0)  # world (x, y) of cell (0, 0)'s centre; +col = +x, +row = +y
 
     @property
     def cells(self) -> Cell:
@@ -118,6 +120,8 @@ class Snapshot:
     segment_note: str = ""
     error: str | None = None
     note: str = ""
+    busy: str = ""  # what the worker is doing that holds the page's controls (a reset, a model load)
+    run_queued: bool = False  # Run was pressed during a reset: it starts when the reset ends
     stepped_at: float = 0.0  # time.time() when the step's event arrived (latency measurements)
 
 
@@ -129,3 +133,5 @@ class Notice:
     level: str = "info"  # "info" | "warning" | "error"
     client_id: int | None = None
     details: dict = field(default_factory=dict)
+    sticky: bool = False  # stays until dismissed (outcomes, failures): a user away for a minute still sees it
+    title: str = ""  # empty: one by level ("L3MVN", "Request refused", "Error")

@@ -15,7 +15,7 @@ from typing import Any, Callable
 
 import viser
 import websockets.asyncio.server
-from viser._messages import GuiUpdateMessage
+from viser._messages import GuiUpdateMessage, RunJavascriptMessage
 from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
 
@@ -173,3 +173,16 @@ def show_value_to(client: viser.ClientHandle, handle: Any) -> None:
     the real value; the handle's setter only broadcasts changes, and viser has no per-tab update.
     """
     client._websock_connection.queue_message(GuiUpdateMessage(handle_uuid(handle), {"value": handle.value}))
+
+
+def run_script_on_connect(server: viser.ViserServer, source: str) -> None:
+    """Run ``source`` (JavaScript) once in every tab as it connects.
+
+    viser 1.1 has no public way to add script to its page; its own ``RunJavascriptMessage`` (how
+    ``gui.add_plotly`` ships plotly.js) is the supported channel for code the server sends. The
+    script is ours, constant, and sent only by this server.
+    """
+
+    @server.on_client_connect
+    def _(client: viser.ClientHandle) -> None:
+        client._websock_connection.queue_message(RunJavascriptMessage(source=source))
