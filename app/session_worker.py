@@ -172,9 +172,7 @@ class DashboardController:
             self._steps_pending += 1
 
         def drive_one() -> None:
-            current = self._require_running_episode()
-            current.policy.drive(chosen)
-            current.step()
+            self._require_running_episode().drive(chosen)
 
         self._submit("step", drive_one, client_id)
 

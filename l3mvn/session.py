@@ -38,6 +38,13 @@ class Steerable(Protocol):
     def set_scorer(self, name: str) -> None: ...
 
 
+@runtime_checkable
+class Drivable(Protocol):
+    """A policy whose next action a person gives (``teleop``)."""
+
+    def drive(self, action: Action | int | str) -> None: ...
+
+
 class EpisodeSession:
     """Drives one episode. Policies return an Action or a Decision (map-based agents explain
     themselves); every step is published on ``bus`` as a StepEvent. ``task`` judges it."""
@@ -124,6 +131,15 @@ class EpisodeSession:
     def set_scorer(self, name: str) -> None:
         """Swap the language scorer of a language policy from the next frontier choice on."""
         self._steerable("a language scorer").set_scorer(name)
+
+    def drive(self, action: Action | int | str) -> StepEvent:
+        """One step with ``action`` chosen by hand (a ``Drivable`` policy only)."""
+        if self.episode is None or self.env.done:
+            raise L3MVNError("no running episode: reset first")
+        if not isinstance(self.policy, Drivable):
+            raise L3MVNError(f"policy {self.policy_name!r} is not driven by hand: pick policy teleop")
+        self.policy.drive(action)
+        return self.step()
 
     def _steerable(self, what: str) -> Steerable:
         if not isinstance(self.policy, Steerable):
