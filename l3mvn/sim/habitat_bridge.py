@@ -31,6 +31,7 @@ import numpy as np
 from l3mvn.config import SimConfig
 from l3mvn.errors import L3MVNError, one_line
 from l3mvn.scenes.categories import RAW_NAMES
+from l3mvn.sim.base import EpisodeState
 from l3mvn.scenes.scan import ScanFloor
 from l3mvn.scenes.scene import SceneMap
 from l3mvn.sim import habitat_server as wire
@@ -189,7 +190,7 @@ def _last_line(stream) -> str:
     return lines[-1] if lines else ""
 
 
-class BridgeEnvironment:
+class BridgeEnvironment(EpisodeState):
     """The ``Environment`` contract served by a bridge server for one floor (``scene``), whose
     ``SceneMap`` gives the categories, the floor's key and its frame against Habitat's.
     ``scene_path`` is what the server loads (a scan file for habitat-sim)."""
@@ -241,38 +242,6 @@ class BridgeEnvironment:
         self._path += float(reply["moved_m"])
         return self._observation(reply, arrays)
 
-    def set_goal(self, goal: str) -> None:
-        self._check_goal(goal)
-        self._episode = dataclasses.replace(self.episode, goal=goal)
-
-    @property
-    def done(self) -> bool:
-        return self._stopped or self._steps >= self.cfg.max_steps
-
-    @property
-    def stopped(self) -> bool:
-        return self._stopped
-
-    @property
-    def pose(self) -> Pose:
-        if self._pose is None:
-            raise L3MVNError("no episode: call reset() first")
-        return self._pose
-
-    @property
-    def steps(self) -> int:
-        return self._steps
-
-    @property
-    def path_length_m(self) -> float:
-        return self._path
-
-    @property
-    def episode(self) -> Episode:
-        if self._episode is None:
-            raise L3MVNError("no episode: call reset() first")
-        return self._episode
-
     def forward_result(self, pose: Pose) -> tuple[Pose, float]:
         """Where a forward move from ``pose`` would end on this floor's grid (our simulator's motion
         model, without moving): for planners that look ahead, such as the oracle. The move itself
@@ -305,10 +274,6 @@ class BridgeEnvironment:
         self.close()
 
     # --- helpers -----------------------------------------------------------------------------
-    def _check_goal(self, goal: str) -> None:
-        if goal not in self.categories:
-            raise L3MVNError(f"unknown goal {goal!r} for {self.scene.key}; categories: {', '.join(self.categories)}")
-
     def _observation(self, reply: dict, arrays: dict[str, np.ndarray]) -> Observation:
         h, w = self.cfg.frame_height, self.cfg.frame_width
         shapes = {"rgb": ((h, w, 3), np.uint8), "depth": ((h, w), np.float32), "semantic": ((h, w), np.int32)}

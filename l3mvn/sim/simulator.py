@@ -8,7 +8,6 @@ cell; a blocked sub-step slides along the wall or stops, so a move never passes 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from functools import cached_property
 
@@ -17,12 +16,13 @@ import numpy as np
 from l3mvn.config import SimConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.scenes.scene import SceneMap
+from l3mvn.sim.base import EpisodeState
 from l3mvn.sim.render import Renderer
 from l3mvn.types import Action, Episode, Observation, Pose
 from l3mvn.sim.world import build_world
 
 
-class BuiltinSimulator:
+class BuiltinSimulator(EpisodeState):
     """One scene floor; episodes on it are reset in turn. Satisfies ``sim.base.Environment``."""
 
     def __init__(self, scene: SceneMap, cfg: SimConfig | None = None) -> None:
@@ -80,45 +80,6 @@ class BuiltinSimulator:
             self._tilt = math.radians(tilt)
         self._pose = pose
         return self._observe(collided)
-
-    def set_goal(self, goal: str) -> None:
-        """Retarget the running episode (the dashboard's mid-episode target change)."""
-        self._check_goal(goal)
-        self._episode = dataclasses.replace(self.episode, goal=goal)
-
-    @property
-    def done(self) -> bool:
-        return self._stopped or self._steps >= self.cfg.max_steps
-
-    @property
-    def stopped(self) -> bool:
-        return self._stopped
-
-    @property
-    def pose(self) -> Pose:
-        if self._pose is None:
-            raise L3MVNError("no episode: call reset() first")
-        return self._pose
-
-    @property
-    def steps(self) -> int:
-        return self._steps
-
-    @property
-    def path_length_m(self) -> float:
-        return self._path
-
-    @property
-    def episode(self) -> Episode:
-        if self._episode is None:
-            raise L3MVNError("no episode: call reset() first")
-        return self._episode
-
-    def _check_goal(self, goal: str) -> None:
-        """Observations label the goal by its category id: the goal must be one of the scene's
-        categories (whether it is present, and where, is the task's business)."""
-        if goal not in self.categories:
-            raise L3MVNError(f"unknown goal {goal!r} for {self.scene.key}; categories: {', '.join(self.categories)}")
 
     # --- mechanics ---------------------------------------------------------------------------
     def is_walkable(self, x: float, y: float) -> bool:
