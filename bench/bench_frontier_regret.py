@@ -1,6 +1,10 @@
 """How good is each global policy's frontier choice, judged by the ground truth, on the same maps?
 
     python bench/bench_frontier_regret.py --dataset DIR [--split train] [--workers 2] [--limit N]
+        [--houses held-out | --houses A B ...]
+
+``--houses held-out`` keeps the houses ``house_split`` puts on the test side: the frontier-trained
+head never saw them (neither in training nor in choosing its checkpoint).
 
 One behaviour policy (cost-utility by default) walks every episode. At each re-selection, every
 policy under test chooses among the *same* frontiers on the *same* map, and the choice is scored by
@@ -32,6 +36,7 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 from l3mvn.config import Config, PolicyConfig  # noqa: E402
 from l3mvn.datasets import load_episode_set  # noqa: E402
 from l3mvn.language import GOALS  # noqa: E402
+from l3mvn.language.frontier_head import house_split  # noqa: E402
 from l3mvn.registry import make_policy  # noqa: E402
 from l3mvn.policies.oracle import frontier_goal_distances  # noqa: E402
 from l3mvn.runner import Runner  # noqa: E402
@@ -42,6 +47,9 @@ CANDIDATES = [
     ("frontier", "frontier", PolicyConfig()),
     ("l3mvn-ff", "l3mvn-ff", PolicyConfig()),
     ("l3mvn-ff official_code", "l3mvn-ff", PolicyConfig(selection="official_code")),
+    ("l3mvn-ff rooms head", "l3mvn-ff", PolicyConfig(head="rooms")),
+    ("l3mvn-ff frontiers head", "l3mvn-ff", PolicyConfig(head="frontiers")),
+    ("l3mvn-ff frontiers expected", "l3mvn-ff", PolicyConfig(head="frontiers", selection="expected")),
     ("l3mvn-zs", "l3mvn-zs", PolicyConfig()),
     ("l3mvn-zs embedding", "l3mvn-zs", PolicyConfig(scorer="embedding")),
     ("near+llm", "near+llm", PolicyConfig()),
@@ -93,11 +101,23 @@ def main() -> None:
     parser.add_argument("--behaviour", default="cost-utility", help="policy that walks the episodes")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--limit", type=int, default=None, help="first N episodes only")
+    parser.add_argument("--houses", nargs="+", default=None,
+                        help="only these houses; 'held-out': the test side of the frontier head's house split")
     parser.add_argument("--json", action="store_true", help="print the table as one JSON line too")
     args = parser.parse_args()
     eset = load_episode_set(args.dataset, args.split, cfg=Config().with_frame(120, 160))
-    n = len(eset.episodes) if args.limit is None else min(args.limit, len(eset.episodes))
-    jobs = [(args.dataset, args.split, i, args.behaviour) for i in range(n)]
+    chosen = list(range(len(eset.episodes)))
+    if args.houses == ["held-out"]:
+        chosen = [i for i in chosen if house_split(eset.episodes[i].scene) == "test"]
+    elif args.houses:
+        unknown = sorted(set(args.houses) - set(eset.scenes))
+        if unknown:
+            parser.error(f"unknown house(s) {', '.join(unknown)}; valid: held-out, {', '.join(sorted(eset.scenes))}")
+        chosen = [i for i in chosen if eset.episodes[i].scene in args.houses]
+    chosen = chosen[: args.limit]
+    n = len(chosen)
+    houses = sorted({eset.episodes[i].scene for i in chosen})
+    jobs = [(args.dataset, args.split, i, args.behaviour) for i in chosen]
     regret: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     changed: dict[str, list[bool]] = defaultdict(list)
     with get_context("forkserver").Pool(args.workers) as pool:
@@ -107,7 +127,8 @@ def main() -> None:
                 regret[label]["all"].append(r)
                 changed[label].append(differs)
     goals = ["all"] + [g for g in GOALS if regret["cost-utility"][g]]
-    print(f"{n} episodes, {len(regret['cost-utility']['all'])} re-selections; mean regret (m) of each choice")
+    print(f"{n} episodes in {len(houses)} houses ({', '.join(houses)}), {len(regret['cost-utility']['all'])} "
+          "re-selections; mean regret (m) of each choice")
     print("| policy | " + " | ".join(goals) + " | differs from cost-utility |")
     print("|---" * (len(goals) + 2) + "|")
     table = {}

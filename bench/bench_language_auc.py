@@ -107,6 +107,8 @@ def main(argv: list[str] | None = None) -> int:
                 options["model"] = args.mlm_model
             if name == "causal":
                 options["model"] = args.causal_model
+            if name == "feedforward":  # room membership is what the room-list head predicts; the frontier head predicts metres
+                options["head"] = "rooms"
             try:
                 scorer = make_scorer(name, **options)
             except L3MVNError as exc:

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from l3mvn.config import SUCCESS_RULES, Config, PolicyConfig, TaskConfig, config_dict, config_hash, override
+from l3mvn.config.policy import DEFAULT_HEAD, HEAD_KINDS, SELECTIONS
 from l3mvn.config.sim import BACKENDS
 from l3mvn.config.task import VIEW_POINT_RULES
 from l3mvn.errors import L3MVNError, one_line
@@ -131,8 +132,12 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     ev.add_argument("--address", default=None,
                     help="Ray cluster to join (auto, HOST:PORT, ray://HOST:10001); default: a private local Ray")
     ev.add_argument("--scorer", default=None, help="language policies: scorer instead of the policy's default")
-    ev.add_argument("--selection", choices=["paper", "official_code"], default="paper",
-                    help="language policies: the paper's bound rule or the official code's thresholds")
+    ev.add_argument("--selection", choices=SELECTIONS, default="paper",
+                    help="language policies: the paper's bound rule, the official code's thresholds, or expected "
+                         "(least cost-utility metres + the frontier head's expected metres; needs --head frontiers)")
+    ev.add_argument("--head", choices=HEAD_KINDS, default=None,
+                    help=f"feed-forward scorer: head trained on frontiers of house maps or on room lists "
+                         f"(default {DEFAULT_HEAD})")
     ev.add_argument("--seg-noise", type=float, default=0.0, metavar="P",
                     help="perception errors: per frame and category, miss / mislabel with probability P")
     ev.add_argument("--sim", choices=BACKENDS, default=None,
@@ -183,11 +188,19 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     bs = lang_sub.add_parser("build-stats", help="recompute the shipped co-occurrence JSON from room data")
     bs.add_argument("--gibson-rooms", default=None, help="gibson_3dsg_rooms.jsonl (default: ../shared when present)")
     bs.add_argument("--out", default=None, help="where to write (default: the shipped file)")
-    th = sub.add_parser("train-head", help="train the feed-forward language head (split by building)")
+    fd = lang_sub.add_parser("frontier-data", help="frontiers an agent chose among on house maps, labelled with "
+                                                   "the ground-truth metres to every goal (for train-head)")
+    from l3mvn.eval.frontier_data import add_arguments as add_frontier_data_arguments
+
+    add_frontier_data_arguments(fd)
+    th = sub.add_parser("train-head", help="train the feed-forward language head (split by house or building)")
+    th.add_argument("--head", choices=HEAD_KINDS, default="frontiers",
+                    help="frontiers: on --data from `language frontier-data`; rooms: the paper's room lists")
+    th.add_argument("--data", nargs="+", default=None, help="--head frontiers: frontier-data file(s)")
     th.add_argument("--model", default="minilm", help="sentence embedder: minilm (shipped) or a HF name/path")
     th.add_argument("--out", default=None, help="where to save the head (default: the shipped file for minilm)")
     th.add_argument("--gibson-rooms", default=None)
-    th.add_argument("--epochs", type=_positive, default=60)
+    th.add_argument("--epochs", type=_positive, default=None, help="default: 80 (frontiers), 60 (rooms)")
     th.add_argument("--seed", type=int, default=0)
 
     cf = sub.add_parser("config", help="every setting of the config tree, with --set applied, and its hash")
@@ -365,7 +378,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
         if args.scorer not in scorer_names():
             raise L3MVNError(f"unknown scorer {args.scorer!r}; valid scorers: {', '.join(scorer_names())}")
-    cfg = _config(args, PolicyConfig(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise))
+    cfg = _config(args, PolicyConfig(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise,
+                                     head=args.head))
     rule = cfg.task.success_rule
     if cfg.sim.backend == "habitat" and args.scenes is None:
         raise L3MVNError("--sim habitat runs scans: give --dataset with a habitat ObjectNav dataset and --scenes "
@@ -471,6 +485,10 @@ def _cmd_language(args: argparse.Namespace) -> int:
     if args.language_command == "stats":
         print(stats_table(load_stats(), min_rooms=args.min_rooms))
         return 0
+    if args.language_command == "frontier-data":
+        from l3mvn.eval.frontier_data import run
+
+        return run(args)
     kwargs = {"gibson_rooms": args.gibson_rooms}
     if args.out:
         kwargs["out"] = args.out
@@ -480,10 +498,10 @@ def _cmd_language(args: argparse.Namespace) -> int:
 
 
 def _cmd_train_head(args: argparse.Namespace) -> int:
-    from l3mvn.language import train_head
+    from l3mvn.language import train_any_head
 
-    metrics = train_head(model=args.model, out=args.out, gibson_rooms=args.gibson_rooms, epochs=args.epochs,
-                         seed=args.seed)
+    metrics = train_any_head(args.head, data=args.data, model=args.model, out=args.out,
+                             gibson_rooms=args.gibson_rooms, epochs=args.epochs, seed=args.seed)
     print(json.dumps(metrics, indent=2, sort_keys=True, default=str))
     return 0
 

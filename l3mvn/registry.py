@@ -5,12 +5,14 @@
 global policy (only the choice of long-term goal differs between them). ``oracle-frontier`` is that
 agent with a global policy that reads the ground truth: the ceiling for any frontier prior. The
 paper's Table II ablations are names too: ``exp`` (= cost-utility), ``exp+llm`` (= l3mvn-ff) and
-``near+llm``; ground truth vs noisy segmentation is ``--seg-noise``.
+``near+llm``; ground truth vs noisy segmentation is ``--seg-noise``. ``teleop`` is the map-based agent
+with a person choosing each action (the dashboard's Drive keys); it refuses to act on its own.
 """
 
 from __future__ import annotations
 
 from l3mvn.agent import MapAgent
+from l3mvn.agent.teleop import TeleopAgent
 from l3mvn.config import Config, PolicyConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.policies.global_policies import GLOBAL_POLICIES
@@ -27,8 +29,10 @@ LANGUAGE_POLICIES = {
     "near+llm": ("feedforward", "nearest", "feedforward"),
 }
 ALIASES = {"exp": "cost-utility", "exp+llm": "l3mvn-ff"}
+TELEOP = "teleop"  # the map-based agent driven by hand from the dashboard (l3mvn.agent.teleop)
 POLICY_NAMES: tuple[str, ...] = (
     DIRECT_POLICIES + tuple(GLOBAL_POLICIES) + ("oracle-frontier",) + tuple(LANGUAGE_POLICIES) + tuple(ALIASES)
+    + (TELEOP,)
 )
 
 
@@ -57,11 +61,14 @@ def make_policy(name: str, env: BuiltinSimulator, task: ObjectNavTask, config: C
         return OraclePolicy(env, task)
     if name == "random-walk":
         return RandomWalkPolicy(seed)
+    if name == TELEOP:  # frontiers scored by cost-utility, so the page shows what the agent would do
+        return TeleopAgent(GLOBAL_POLICIES["cost-utility"](), env.categories, config, seed)
     if name in LANGUAGE_POLICIES:
         scorer, exploration, paradigm = LANGUAGE_POLICIES[name]
         p = config.policy
         global_policy = LanguageFrontierPolicy(name, p.scorer or scorer, exploration, p.selection, paradigm,
-                                               (p.bound_low, p.bound_high))
+                                               (p.bound_low, p.bound_high), p.head,
+                                               config.frontiers.cu_lambda)
     elif name == "oracle-frontier":
         global_policy = FrontierOracle(task)
     else:

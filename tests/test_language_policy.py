@@ -17,7 +17,7 @@ def _frontier(i: int, objects: tuple[str, ...], s_cu: float, utility: float = 10
 
 @pytest.fixture(scope="module")
 def policy():
-    return LanguageFrontierPolicy("l3mvn-ff", "feedforward")
+    return LanguageFrontierPolicy("l3mvn-ff", "feedforward", head="rooms")  # the paper's recipe
 
 
 def test_confident_language_wins_over_exploration(policy):
@@ -47,7 +47,7 @@ def test_in_between_fuses_with_cost_utility_rescaled_into_the_bound(policy):
 
 
 def test_official_code_feedforward_falls_back_to_best_utility_below_0_2():
-    policy = LanguageFrontierPolicy("l3mvn-ff", "feedforward", selection="official_code")
+    policy = LanguageFrontierPolicy("l3mvn-ff", "feedforward", selection="official_code", head="rooms")
     frontiers = [_frontier(0, (), 0.3, utility=5.0), _frontier(1, (), 0.9, utility=20.0)]
     sel = policy.select(frontiers, None, "bed", np.random.default_rng(0))
     assert sel.frontier == 1 and "utility" in sel.reason

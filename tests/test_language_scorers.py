@@ -15,7 +15,9 @@ SHIPPED = ("embedding", "roomtype", "feedforward")
 
 @pytest.fixture(scope="module")
 def scorers():
-    return {name: make_scorer(name) for name in SHIPPED}
+    # The feed-forward scorer with the room-list head: these tests check room knowledge (the frontier
+    # head is tested in test_language_frontier_policy.py).
+    return {name: make_scorer(name, **({"head": "rooms"} if name == "feedforward" else {})) for name in SHIPPED}
 
 
 def test_registry_names_every_scorer():

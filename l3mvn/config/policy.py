@@ -7,8 +7,16 @@ from dataclasses import dataclass
 
 from l3mvn.errors import L3MVNError
 
-# Language policies: the paper's bound rule, or the thresholds of the authors' code.
-SELECTIONS = ("paper", "official_code")
+# Language policies: the paper's bound rule, the thresholds of the authors' code, or (with a head that
+# predicts distances) the frontier with the least cost-utility metres (C - U / lambda) + expected metres
+# on to the goal (see l3mvn.policies.language_policy).
+SELECTIONS = ("paper", "official_code", "expected")
+# Feed-forward heads: trained on frontiers of house maps, or on room object lists (the paper's recipe).
+# The default is the frontier head: on the 6 Gibson houses held out from its training, l3mvn-ff's mean
+# regret per frontier choice is 1.034 m with it against 1.177 m with the room head (cost-utility 0.959;
+# bench/bench_frontier_regret.py --houses held-out, l3mvn/data/language/MODEL_CARD.md).
+HEAD_KINDS = ("frontiers", "rooms")
+DEFAULT_HEAD = "frontiers"
 
 
 @dataclass(frozen=True)
@@ -20,10 +28,13 @@ class PolicyConfig:
     bound_low: float = 0.15
     bound_high: float = 0.30
     seg_noise: float = 0.0  # map-based policies: perception errors (see l3mvn.perception)
+    head: str | None = None  # feed-forward scorer: a head kind instead of DEFAULT_HEAD
 
     def __post_init__(self) -> None:
         if self.selection not in SELECTIONS:
             raise L3MVNError(f"unknown selection {self.selection!r}; valid: {', '.join(SELECTIONS)}")
+        if self.head is not None and self.head not in HEAD_KINDS:
+            raise L3MVNError(f"unknown feed-forward head {self.head!r}; valid: {', '.join(HEAD_KINDS)}")
         if not 0.0 <= self.bound_low < self.bound_high <= 1.0:
             raise L3MVNError(f"the bound must satisfy 0 <= bound_low < bound_high <= 1, got {self.bound_low}, "
                              f"{self.bound_high}")

@@ -1,4 +1,5 @@
-"""The feed-forward head: sentence embedding -> 3-layer MLP -> logits over the six goals.
+"""The feed-forward head: sentence embedding -> 3-layer MLP -> one number per goal (logits of p(goal)
+for the room-list head, expected metres to the goal for the frontier head; ``meta["kind"]`` says which).
 
 Layout of the paper's code (1024-512-256-6 for RoBERTa-large; 384-512-256-6 for MiniLM), BatchNorm
 and ReLU after each hidden layer. Saved as one torch file: ``{"state_dict", "meta"}``, where
@@ -15,7 +16,9 @@ from torch import nn
 from l3mvn.errors import L3MVNError
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data" / "language"
-SHIPPED_HEADS = {"minilm": DATA_DIR / "head_minilm.pt"}
+# "<embedder>" is the room-list head (the paper's recipe), "<embedder>-frontiers" the one trained on
+# frontiers of house maps (``frontier_head``).
+SHIPPED_HEADS = {"minilm": DATA_DIR / "head_minilm.pt", "minilm-frontiers": DATA_DIR / "head_minilm_frontiers.pt"}
 HIDDEN = (512, 256)
 
 

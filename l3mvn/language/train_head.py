@@ -1,4 +1,5 @@
-"""Training the feed-forward head on real rooms (``l3mvn train-head``).
+"""Training the feed-forward head (``l3mvn train-head``): on frontiers of house maps (``--head
+frontiers --data F``, ``frontier_head``) or, the paper's recipe, on real rooms (``--head rooms``, here).
 
 Samples: per room, each labelled goal present becomes a label and the room's other *informative*
 objects the sample (the runtime query only ever names those). A frontier window sees part of a room,
@@ -151,4 +152,26 @@ def _majority(yt, yv, wv) -> float:
     return float(((yv == top).float() * wv).sum() / wv.sum())
 
 
-__all__ = ["Sample", "room_samples", "train_head", "TRAIN_COMMAND"]
+def train_any_head(head: str, data: list[str] | None = None, model: str = MINILM, out: str | Path | None = None,
+                   gibson_rooms: str | Path | None = None, epochs: int | None = None, seed: int = 0) -> dict:
+    """``l3mvn train-head``: the frontier head from ``data`` or the room-list head from room data,
+    each with its own default epochs; flags that do not apply to ``head`` are refused."""
+    from l3mvn.config.policy import HEAD_KINDS
+    from l3mvn.language.frontier_head import train_frontier_head
+
+    if head not in HEAD_KINDS:
+        raise L3MVNError(f"unknown head {head!r}; valid: {', '.join(HEAD_KINDS)}")
+    if head == "rooms":
+        if data:
+            raise L3MVNError("--data is frontier data, for --head frontiers; the rooms head reads --gibson-rooms")
+        return train_head(model=model, out=out, gibson_rooms=gibson_rooms, seed=seed,
+                          **({} if epochs is None else {"epochs": epochs}))
+    if gibson_rooms:
+        raise L3MVNError("--gibson-rooms is room data, for --head rooms; the frontiers head reads --data")
+    command = f"{TRAIN_COMMAND} --head frontiers --data {' '.join(map(str, data or []))} --model {model}" + (
+        f" --epochs {epochs}" if epochs is not None else "") + f" --seed {seed}"
+    return train_frontier_head(data or [], model=model, out=out, seed=seed, command=command,
+                               **({} if epochs is None else {"epochs": epochs}))
+
+
+__all__ = ["Sample", "room_samples", "train_head", "train_any_head", "TRAIN_COMMAND"]

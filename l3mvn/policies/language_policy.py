@@ -10,6 +10,17 @@ it than exploration is about the best alternative.
 its max > 0.2, else the best-utility frontier; zero-shot takes argmax if max > 0.3, else the first
 frontier by utility whose score is > 0.1, else the best-utility one; a frontier with no objects scores
 0.1 + 0.1 * U / max U.
+
+With the feed-forward head trained on frontiers (``head="frontiers"``), which predicts the metres from
+each frontier to each goal, S_LLM is that head's listwise reading: softmax over the frontiers of
+-metres / 1 m, the probability that a frontier is the one nearest the goal (what its loss trained).
+``selection="expected"`` uses the metres directly: the frontier with the least C - U / lambda + expected
+metres on to the goal. C - U / lambda is cost-utility's own criterion in metres (argmax S_CU = argmin
+of it, ``FrontierConfig.cu_lambda``), so a flat prior gives exactly cost-utility's choice and the head
+only moves it by the metres it expects; it is the frontier oracle's criterion with the prior (plus
+cost-utility's size bonus) in place of the ground truth. It needs no bound, so it suits a calibrated
+prior; the bound rule suits a weak one, whose scores only matter above sup B (numbers: the regret
+bench, bench/bench_frontier_regret.py).
 """
 
 from __future__ import annotations
@@ -18,20 +29,31 @@ from functools import lru_cache
 
 import numpy as np
 
-from l3mvn.config import SELECTIONS, PolicyConfig
+from l3mvn.config import SELECTIONS, FrontierConfig, PolicyConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.frontiers import Frontier
 from l3mvn.policies.global_policies import LanguageScore, Selection
 
 
 
+LISTWISE_TEMPERATURE_M = 1.0  # the frontier head's training tau (frontier_head.train_frontier_head)
+
+
+def shared_scorer(name: str, head: str | None = None):
+    """One scorer per process, name and head: models load once and the (object set, goal) cache is
+    shared across episodes, where the same object sets keep recurring."""
+    return _shared_scorer(name, head)
+
+
 @lru_cache(maxsize=4)
-def shared_scorer(name: str):
-    """One scorer per process and name: models load once and the (object set, goal) cache is shared
-    across episodes, where the same object sets keep recurring."""
+def _shared_scorer(name: str, head: str | None):
     from l3mvn.language import make_scorer
 
-    return make_scorer(name)
+    if head is None:
+        return make_scorer(name)
+    if name != "feedforward":
+        raise L3MVNError(f"a head ({head!r}) applies to the feedforward scorer only, not {name!r}")
+    return make_scorer(name, head=head)
 
 
 class LanguageFrontierPolicy:
@@ -39,18 +61,30 @@ class LanguageFrontierPolicy:
 
     def __init__(self, name: str, scorer: str, exploration: str = "cost-utility", selection: str = "paper",
                  paradigm: str = "feedforward",
-                 bound: tuple[float, float] = (PolicyConfig.bound_low, PolicyConfig.bound_high)) -> None:
+                 bound: tuple[float, float] = (PolicyConfig.bound_low, PolicyConfig.bound_high),
+                 head: str | None = None, cu_lambda: float = FrontierConfig.cu_lambda) -> None:
         if selection not in SELECTIONS:
             raise L3MVNError(f"unknown selection {selection!r}; valid: {', '.join(SELECTIONS)}")
         if exploration not in ("cost-utility", "nearest"):
             raise L3MVNError(f"unknown exploration score {exploration!r}; valid: cost-utility, nearest")
         self.name, self.scorer_name = name, scorer
         self.exploration, self.selection, self.paradigm = exploration, selection, paradigm
-        self.bound = bound
-        self.scorer = shared_scorer(scorer)
+        if head is not None and scorer != "feedforward":
+            raise L3MVNError(f"a head ({head!r}) applies to the feedforward scorer only, not {scorer!r}")
+        if selection == "expected" and not cu_lambda > 0:
+            raise L3MVNError(f"selection 'expected' needs frontiers.cu_lambda > 0 (cost-utility in metres), got {cu_lambda}")
+        self.bound, self.head, self.cu_lambda = bound, head, cu_lambda
+        self.scorer = self._make(scorer)
+
+    def _make(self, scorer: str):
+        made = shared_scorer(scorer, self.head if scorer == "feedforward" else None)
+        if self.selection == "expected" and not getattr(made, "predicts_distance", False):
+            raise L3MVNError(f"selection 'expected' needs a scorer that predicts distances (feedforward with "
+                             f"head 'frontiers'), not {scorer!r}; valid selections for it: paper, official_code")
+        return made
 
     def set_scorer(self, scorer: str) -> None:
-        self.scorer_name, self.scorer = scorer, shared_scorer(scorer)
+        self.scorer_name, self.scorer = scorer, self._make(scorer)
 
     def select(self, frontiers: list[Frontier], sem_map, goal: str, rng) -> Selection | None:
         if not frontiers:
@@ -59,17 +93,35 @@ class LanguageFrontierPolicy:
         dists = self.scorer.score(objects)
         s_llm = np.array([d[goal] for d in dists])
         explore = self._exploration(frontiers)
-        if self.selection == "official_code":
+        metres = None
+        if getattr(self.scorer, "predicts_distance", False):
+            metres = self.scorer.expected_distance(objects)[:, self.scorer.goals.index(goal)]
+            z = -metres / LISTWISE_TEMPERATURE_M
+            s_llm = np.exp(z - z.max()) / np.exp(z - z.max()).sum()
+        if self.selection == "expected":
+            i, reason, fused = self._expected(frontiers, metres)
+        elif self.selection == "official_code":
             i, reason = self._official(frontiers, s_llm, explore)
             fused = s_llm
         else:
             i, reason, fused = self._paper(s_llm, explore)
         language = tuple(
             LanguageScore(queries=self.scorer.queries(objs), llm_scores={g: round(p, 4) for g, p in d.items()},
-                          s_llm=float(d[goal]), fused=float(v))
-            for objs, d, v in zip(objects, dists, fused)
+                          s_llm=float(p), fused=float(v))
+            for objs, d, p, v in zip(objects, dists, s_llm, fused)
         )
         return Selection(i, frontiers[i].center, np.asarray(fused, dtype=np.float64), reason, language)
+
+    def _expected(self, frontiers: list[Frontier], metres: np.ndarray) -> tuple[int, str, np.ndarray]:
+        """argmin of C - U / lambda + expected metres on; fused = that total min-max flipped into [0, 1]
+        (1 = best), the scale the agent's commitment margin reads."""
+        base = np.array([f.cost - f.utility / self.cu_lambda for f in frontiers], dtype=np.float64)
+        total = base + metres
+        i = int(np.argmin(total))
+        span = total.max() - total.min()
+        fused = np.ones_like(total) if span <= 0 else 1.0 - (total - total.min()) / span
+        return i, (f"expected: {frontiers[i].cost:.1f} m to frontier - {frontiers[i].utility / self.cu_lambda:.1f} m "
+                   f"size bonus + {metres[i]:.1f} m expected on = {total[i]:.1f} m (least)"), fused
 
     def _exploration(self, frontiers: list[Frontier]) -> np.ndarray:
         if self.exploration == "cost-utility":
