@@ -12,11 +12,13 @@ from l3mvn.errors import L3MVNError
 # on to the goal (see l3mvn.policies.language_policy).
 SELECTIONS = ("paper", "official_code", "expected")
 # Feed-forward heads: trained on frontiers of house maps, or on room object lists (the paper's recipe).
-# The default is the frontier head: on the 6 Gibson houses held out from its training, l3mvn-ff's mean
-# regret per frontier choice is 1.034 m with it against 1.177 m with the room head (cost-utility 0.959;
-# bench/bench_frontier_regret.py --houses held-out, l3mvn/data/language/MODEL_CARD.md).
+# The default stays the room head: the frontier head's mean regret per choice is lower on the 6 Gibson
+# houses held out from its training (1.034 m against 1.177 m; cost-utility 0.959), but the episodes
+# say otherwise: l3mvn-ff on the 200 dev episodes SR / SPL 0.930 / 0.659 with it against 0.945 / 0.674
+# with the room head, and 0.979 / 0.662 against 0.979 / 0.690 on the 48 of the held-out houses (seed
+# spread +-0.025; docs/benchmarks.md, l3mvn/data/language/MODEL_CARD.md).
 HEAD_KINDS = ("frontiers", "rooms")
-DEFAULT_HEAD = "frontiers"
+DEFAULT_HEAD = "rooms"
 
 
 @dataclass(frozen=True)
