@@ -236,13 +236,14 @@ def test_a_port_lost_after_the_check_is_reported_not_moved_to_the_next_and_leave
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory) -> Path:
-    """A 10-step random-walk episode recorded by the real loop (as tests/test_recording.py does)."""
+    """An oracle episode of up to 30 steps recorded by the real loop (as tests/test_recording.py does):
+    long enough that the layout, sent first, is a small share of the file (random walk stopped after 3)."""
     scene = draw_two_room_house()
     episode = generate_episodes(scene, 1, seed=3, goals=("toilet",))[0]
-    cfg = Config(sim=dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=10))
+    cfg = Config(sim=dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=30))
     bus = EventBus()
-    recorder = Recorder.for_episode(tmp_path_factory.mktemp("recordings"), "tiny", episode, "random-walk").attach(bus)
-    Runner(cfg).run(scene, episode, "random-walk", bus)
+    recorder = Recorder.for_episode(tmp_path_factory.mktemp("recordings"), "tiny", episode, "oracle").attach(bus)
+    assert Runner(cfg).run(scene, episode, "oracle", bus).steps >= 10
     assert recorder.closed and recorder.errors == 0
     return recorder.path
 
