@@ -32,6 +32,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speed", type=float, default=4.0, help="steps per second while running (default 4)")
     parser.add_argument("--record", action="store_true", help="record each episode to recordings/*.rrd")
     parser.add_argument("--record-dir", default="recordings", help="where --record writes (default recordings/)")
+    parser.add_argument("--results", default=None, metavar="DIR",
+                        help="add a Results panel over the eval result files (*.jsonl) in DIR")
+    parser.add_argument("--recordings", default=None, metavar="DIR",
+                        help="where the Results panel finds episode recordings (default: --record-dir)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -51,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
                                    policy=args.policy, host=args.host, port=args.port, houses=args.houses,
                                    episodes_per_house=args.episodes_per_house, seed=args.seed,
                                    steps_per_second=args.speed, record=args.record, record_dir=args.record_dir,
-                                   allow_origins=args.allow_origin)
+                                   allow_origins=args.allow_origin, results_dir=args.results,
+                                   recordings_dir=args.recordings)
         except L3MVNError as exc:
             print(f"error: {one_line(exc)}", file=sys.stderr)
             return 2

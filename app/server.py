@@ -10,11 +10,13 @@ from typing import Iterable
 import viser
 
 from app.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS, OriginPolicy
+from app.results_view import ResultsSource
 from app.session_worker import DashboardController
 from app.views import DashboardView
 from app.viser_hooks import start_checked_server
 from l3mvn.config import Config
 from l3mvn.datasets import load_episode_set
+from l3mvn.errors import L3MVNError
 from l3mvn.serving import check_listen_address
 
 log = logging.getLogger(__name__)
@@ -45,11 +47,15 @@ def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", po
                     episodes_per_house: int = 5, seed: int = 0, cfg: Config | None = None,
                     steps_per_second: float = 4.0, record: bool = False,
                     record_dir: str | Path = "recordings", verbose: bool = False,
-                    allow_origins: Iterable[str] = ()) -> Dashboard:
+                    allow_origins: Iterable[str] = (), results_dir: str | Path | None = None,
+                    recordings_dir: str | Path | None = None) -> Dashboard:
     """Load the episodes, start the worker and serve the page (returns at once; threads run it).
 
     Only pages served from this dashboard's own address, or from one of ``allow_origins`` (a reverse
     proxy's public origin, ``https://host[:port]``), may connect: see app/origin.py.
+
+    ``results_dir`` adds the Results panel over the eval result files in that folder (their recordings
+    are looked up in ``recordings_dir``, default ``record_dir``; re-runs use this episode set and seed).
 
     It serves on exactly ``host:port``; a bad port, a host that does not resolve or is not this
     machine's, and a port in use are one-line L3MVNErrors, checked before the episodes load.
@@ -57,6 +63,8 @@ def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", po
     cfg = cfg or Config()
     origins = OriginPolicy(host, allow_origins)
     check_listen_address(host, port)
+    if results_dir is not None and not Path(results_dir).is_dir():
+        raise L3MVNError(f"--results {results_dir} is not a folder (it should hold eval result .jsonl files)")
     if host not in LOOPBACK_HOSTS:
         log.warning("serving on %s: anyone who can reach this machine can drive the dashboard; browsers "
                     "that open it by another name need %s http://NAME:%d", host, ALLOW_ORIGIN_FLAG, port)
@@ -73,7 +81,10 @@ def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", po
         controller.close()
         raise
     try:
-        view = DashboardView(server, controller)
+        source = None if results_dir is None else ResultsSource(
+            Path(results_dir), Path(recordings_dir if recordings_dir is not None else record_dir),
+            None if dataset is None else str(dataset), split, houses, episodes_per_house, seed)
+        view = DashboardView(server, controller, source)
     except BaseException:
         controller.close()
         server.stop()

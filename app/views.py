@@ -26,6 +26,7 @@ import viser
 
 from app.client_input import ray_refusal, update_refusal
 from app.map_image import GT_FLOOR, GT_GOAL, GT_REGION, ground_truth_layer, score_color
+from app.results_view import ResultsPanel, ResultsSource
 from app.session_worker import DEFAULT_SCORER, FRAME_WIDTH, MAX_SPEED, MIN_SPEED, DashboardController
 from app.state import Cell, FrontierMarker, MapView, Notice, Snapshot
 from app.viser_hooks import (
@@ -117,7 +118,8 @@ def ray_to_cell(origin, direction, res: float) -> Cell | None:
 class DashboardView:
     """Builds the page once and keeps it in sync with the controller's snapshots."""
 
-    def __init__(self, server: viser.ViserServer, controller: DashboardController) -> None:
+    def __init__(self, server: viser.ViserServer, controller: DashboardController,
+                 results: ResultsSource | None = None) -> None:
         self.server, self.ctl = server, controller
         self._latest: Snapshot | None = None
         self._drawn: tuple = (None, None)  # (event, manual goal) the map was last drawn for
@@ -129,8 +131,10 @@ class DashboardView:
         self._busy_notes: dict[int, viser.NotificationHandle] = {}
         self._gt_key: tuple | None = None  # what the ground-truth layer was last built for
         self._build_gui()
+        self.results = None if results is None else ResultsPanel(server.gui, results, on=self._on, tell=self._tell)
         self._build_scene()
-        self._inputs = {handle_uuid(h): h for h in vars(self).values() if isinstance(h, _INPUTS)}
+        panel_inputs = () if self.results is None else self.results.inputs
+        self._inputs = {handle_uuid(h): h for h in (*vars(self).values(), *panel_inputs) if isinstance(h, _INPUTS)}
         check_gui_updates(server, self._admit_update)
         ignore_client_messages_except(server, "GuiUpdateMessage", "ScenePointerMessage")  # controls, map clicks
         run_script_on_connect(server, SHORTCUTS_JS)

@@ -1,0 +1,218 @@
+"""The results browser's data: eval result files in a folder, their episodes, filters, summaries,
+recordings read back frame by frame, and a headless re-run of one result line.
+
+The browser only offers files found in the ``--results`` folder (nothing typed in the page), and every
+bad file or line becomes a one-line problem beside what could be read, never an exception in a view.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from l3mvn.config import Config
+from l3mvn.errors import L3MVNError, first_line
+from l3mvn.eval.job import EvalJob
+from l3mvn.eval.results import row_problem
+from l3mvn.recording.catalogue import find_recording
+from l3mvn.recording.video import VideoOptions, frames, read_episode
+
+ALL, FAILURES, SUCCESSES = "all", "failures", "successes"
+SORT_KEYS = ("row", "scene", "goal", "success", "spl", "dtg", "steps", "failure", "coverage")
+FRAME_HEIGHT = 240  # pixels of the recording's camera and map panels in the page
+
+
+@dataclass(frozen=True)
+class EpisodeRow:
+    """One episode line of a result file, as the table shows it (``raw`` is the whole line)."""
+
+    index: int  # 1-based line number in the file
+    scene: str
+    episode_id: int
+    goal: str
+    policy: str
+    success: bool
+    spl: float | None
+    dtg: float | None
+    steps: int
+    failure: str
+    coverage: float | None
+    raw: dict
+
+    @property
+    def label(self) -> str:
+        return f"{self.index}: {self.scene} #{self.episode_id} {self.goal} ({'ok' if self.success else self.failure})"
+
+
+@dataclass(frozen=True)
+class ResultFile:
+    """The readable episodes of one file and a one-line problem per line that was left out."""
+
+    path: Path
+    rows: tuple[EpisodeRow, ...]
+    problems: tuple[str, ...]
+
+
+def list_result_files(folder: str | Path) -> list[Path]:
+    """The ``*.jsonl`` files directly in ``folder``, by name (an absent folder has none)."""
+    p = Path(folder)
+    return sorted(p.glob("*.jsonl")) if p.is_dir() else []
+
+
+def load_result_file(path: str | Path) -> ResultFile:
+    """Every valid episode line of ``path``; error rows and malformed lines become problems. A file
+    with no episode line at all is an L3MVNError (it is not a result file)."""
+    p = Path(path)
+    try:
+        lines = p.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as exc:
+        raise L3MVNError(f"cannot read {p.name}: {exc.strerror or exc}") from None
+    rows, problems = [], []
+    for n, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            problems.append(f"line {n}: not JSON")
+            continue
+        if isinstance(row, dict) and "error" in row:
+            problems.append(f"line {n}: episode {row.get('key', '?')} failed to run: {first_line(str(row['error']))}")
+            continue
+        problem = row_problem(row) if isinstance(row, dict) else "not a JSON object"
+        if problem is None and not isinstance(row.get("scene"), str):
+            problem = "no scene"
+        if problem is not None:
+            problems.append(f"line {n}: {problem}")
+            continue
+        extra = row.get("extra") if isinstance(row.get("extra"), dict) else {}
+        rows.append(EpisodeRow(n, row["scene"], int(row.get("episode_id", 0)), row["goal"], row["policy"],
+                               row["success"] == 1, row["spl"], row["dtg"], row["steps"], row["failure"],
+                               extra.get("coverage"), row))
+    if not rows:
+        raise L3MVNError(f"{p.name} is not an eval result file: no episode line"
+                         + (f" ({problems[0]})" if problems else ""))
+    return ResultFile(p, tuple(rows), tuple(problems))
+
+
+def filter_choices(rows: tuple[EpisodeRow, ...]) -> tuple[str, ...]:
+    """all / failures / successes, then ``cause: X`` per failure cause and ``goal: X`` per category present."""
+    causes = sorted({r.failure for r in rows if not r.success})
+    goals = sorted({r.goal for r in rows})
+    return (ALL, FAILURES, SUCCESSES, *(f"cause: {c}" for c in causes), *(f"goal: {g}" for g in goals))
+
+
+def select(rows: tuple[EpisodeRow, ...], how: str, sort: str = "row", descending: bool = False) -> list[EpisodeRow]:
+    """The rows ``how`` keeps (one of ``filter_choices``), sorted by ``sort`` (missing values last)."""
+    if how == ALL:
+        kept = list(rows)
+    elif how == FAILURES:
+        kept = [r for r in rows if not r.success]
+    elif how == SUCCESSES:
+        kept = [r for r in rows if r.success]
+    elif how.startswith("cause: "):
+        kept = [r for r in rows if not r.success and r.failure == how[7:]]
+    elif how.startswith("goal: "):
+        kept = [r for r in rows if r.goal == how[6:]]
+    else:
+        raise L3MVNError(f"unknown filter {how!r}; choose one of {', '.join(filter_choices(rows))}")
+    if sort not in SORT_KEYS:
+        raise L3MVNError(f"unknown sort key {sort!r}; choose one of {', '.join(SORT_KEYS)}")
+    attr = "index" if sort == "row" else sort
+    present = [r for r in kept if getattr(r, attr) is not None]
+    missing = [r for r in kept if getattr(r, attr) is None]
+    return sorted(present, key=lambda r: getattr(r, attr), reverse=descending) + missing
+
+
+def summaries(rows: list[EpisodeRow], by: str = "goal") -> tuple[dict[str, tuple[int, float, float]], dict[str, int]]:
+    """Per ``by`` (goal or scene): (episodes, SR, mean SPL); and episodes per failure cause (``success`` included)."""
+    groups: dict[str, list[EpisodeRow]] = defaultdict(list)
+    for r in rows:
+        groups[getattr(r, by)].append(r)
+    per_group = {g: (len(rs), float(np.mean([r.success for r in rs])), float(np.mean([r.spl or 0.0 for r in rs])))
+                 for g, rs in sorted(groups.items())}
+    causes: dict[str, int] = defaultdict(int)
+    for r in rows:
+        causes[r.failure] += 1
+    return per_group, dict(sorted(causes.items(), key=lambda kv: -kv[1]))
+
+
+def solved_by_one(a: tuple[EpisodeRow, ...], b: tuple[EpisodeRow, ...]) -> tuple[list[EpisodeRow], list[EpisodeRow]]:
+    """Episodes (matched by key) that ``a`` solved and ``b`` did not, and the reverse."""
+    in_b = {r.raw["key"]: r for r in b}
+    in_a = {r.raw["key"]: r for r in a}
+    only_a = [r for r in a if r.success and r.raw["key"] in in_b and not in_b[r.raw["key"]].success]
+    only_b = [r for r in b if r.success and r.raw["key"] in in_a and not in_a[r.raw["key"]].success]
+    return only_a, only_b
+
+
+def recording_of(recordings_dir: str | Path, row: EpisodeRow) -> Path | None:
+    return find_recording(recordings_dir, row.scene, row.episode_id, row.policy)
+
+
+def recording_frames(path: str | Path) -> tuple[list[np.ndarray], list[str]]:
+    """One picture per recorded step (camera, map with frontiers and scores, the decision under them)
+    and that step's decision line; one-line L3MVNError when the file is not a readable recording."""
+    ep = read_episode(path)
+    pictures = list(frames(ep, VideoOptions(height=FRAME_HEIGHT, title_s=0.0), title_frames=0))
+    return pictures, [f"step {s.step}: {s.decision or '(no decision logged)'}" for s in ep.steps]
+
+
+def config_of(row: dict) -> Config:
+    """The config tree stored in a result line; a line without one or with unknown fields is an error."""
+    stored = row.get("config")
+    if not isinstance(stored, dict):
+        raise L3MVNError("this result line stores no config: it cannot be re-run")
+    base = Config()
+    sections = {}
+    for name, values in stored.items():
+        section = getattr(base, name, None)
+        if section is None or not dataclasses.is_dataclass(section) or not isinstance(values, dict):
+            raise L3MVNError(f"the stored config has an unknown section {name!r}: it cannot be re-run")
+        try:
+            sections[name] = dataclasses.replace(section, **{k: tuple(v) if isinstance(v, list) else v
+                                                             for k, v in values.items()})
+        except TypeError as exc:
+            raise L3MVNError(f"the stored config's {name} section does not fit this version: {first_line(exc)}") from None
+    return base.replace(**sections)
+
+
+@dataclass(frozen=True)
+class Rerun:
+    """A re-run of a result line: its new line and whether it reproduced the stored metrics."""
+
+    row: dict
+    same_config: bool  # the config hash (config, policy, seed) equals the stored one
+    reproduced: bool  # success, SPL, DTG, steps and failure cause all equal the stored ones
+
+    @property
+    def summary(self) -> str:
+        new = self.row
+        verdict = "same result as stored" if self.reproduced else "DIFFERENT result from stored"
+        seed = "" if self.same_config else " (config hash differs: another seed or config made the stored line)"
+        return (f"re-run {new.get('key')}: success {new.get('success')}, SPL {new.get('spl')}, steps "
+                f"{new.get('steps')}, {new.get('failure')}: {verdict}{seed}")
+
+
+def rerun(row: dict, *, dataset: str | None, split: str, houses: int, episodes_per_house: int, seed: int,
+          record_dir: str | Path | None = None) -> Rerun:
+    """Run the line's episode again, exactly as ``l3mvn eval`` did (same job path, its stored config and
+    policy, this dashboard's episode set and seed), optionally recording it."""
+    cfg = config_of(row)
+    job = EvalJob.create(dataset, split, houses=houses, episodes_per_house=episodes_per_house, seed=seed,
+                         config=cfg, policy=str(row.get("policy")), record_dir=record_dir)
+    key = str(row.get("key"))
+    if key not in set(job.keys()):
+        raise L3MVNError(f"episode {key} is not in this dashboard's episode set; start serve with the eval's "
+                         "--dataset/--houses/--episodes-per-house/--seed")
+    new = job.run_one(key)
+    if "error" in new:
+        raise L3MVNError(f"re-running {key} failed: {first_line(str(new['error']))}")
+    fields = ("success", "spl", "dtg", "steps", "failure")
+    return Rerun(new, job.config_hash == row.get("config_hash"), all(new.get(f) == row.get(f) for f in fields))
+

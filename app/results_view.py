@@ -1,0 +1,273 @@
+"""The Results panel: browse the eval result files of ``serve --results DIR``.
+
+Pick a file (only files in that folder are offered), filter and sort its episodes, read summaries per
+category and failure cause, open an episode's recording and scrub its steps, or, without one, re-run
+it here with the config stored in its line (recorded, so it then opens like any other). A second file
+can be compared: the episodes one solved and the other did not.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from html import escape
+from pathlib import Path
+
+import numpy as np
+import viser
+
+from app.results import (
+    ALL,
+    SORT_KEYS,
+    EpisodeRow,
+    ResultFile,
+    filter_choices,
+    list_result_files,
+    load_result_file,
+    recording_frames,
+    recording_of,
+    rerun,
+    select,
+    solved_by_one,
+    summaries,
+)
+from l3mvn.errors import L3MVNError
+
+log = logging.getLogger(__name__)
+
+NONE = "(none)"
+TABLE_ROWS = 40  # rows the table shows; the episode dropdown holds them all
+RERUN_NOTE = ("Re-run runs the episode again with the config stored in its line, this dashboard's "
+              "episode set and seed, and records it: the same seed gives the same result (checked, "
+              "and said, after each re-run).")
+
+
+@dataclass(frozen=True)
+class ResultsSource:
+    """Where the panel reads from, and the episode set a re-run uses (the serve flags)."""
+
+    results_dir: Path
+    recordings_dir: Path
+    dataset: str | None
+    split: str
+    houses: int
+    episodes_per_house: int
+    seed: int
+
+
+class ResultsPanel:
+    """Builds the Results folder in the GUI and answers its controls (one state shared by every tab)."""
+
+    def __init__(self, gui: viser.GuiApi, source: ResultsSource, *, on: Callable, tell: Callable) -> None:
+        self.source, self._tell = source, tell
+        self._file: ResultFile | None = None
+        self._shown: list[EpisodeRow] = []
+        self._frames: list[np.ndarray] = []
+        self._decisions: list[str] = []
+        self._lock = threading.Lock()
+        with gui.add_folder("Results", expand_by_default=True):
+            gui.add_markdown(f"Eval result files in `{source.results_dir}`; recordings from `{source.recordings_dir}`.")
+            self.file = gui.add_dropdown("Result file", self._file_names())
+            self.refresh = gui.add_button("Refresh files")
+            self.notes = gui.add_markdown("")
+            self.filter = gui.add_dropdown("Filter", (ALL,))
+            self.sort = gui.add_dropdown("Sort by", SORT_KEYS)
+            self.descending = gui.add_checkbox("Descending", False)
+            self.table = gui.add_html("")
+            self.summary = gui.add_html("")
+            self.episode = gui.add_dropdown("Episode", (NONE,))
+            self.actions = gui.add_button_group("Episode actions", ("Open", "Re-run live"))
+            self.step = gui.add_slider("Step", min=0, max=1, step=1, initial_value=0, disabled=True)
+            self.picture = gui.add_image(np.zeros((8, 8, 3), np.uint8), label="Recorded step")
+            self.decision = gui.add_markdown("")
+            gui.add_markdown(RERUN_NOTE)
+            self.compare = gui.add_dropdown("Compare with", (NONE,) + self._file_names())
+            self.comparison = gui.add_markdown("")
+        self._wire(on)
+        if self.file.value != NONE:
+            try:
+                self._load(self.file.value)
+            except L3MVNError:  # the first file is not a result file: its note says so, pick another
+                pass
+
+    @property
+    def inputs(self) -> tuple:
+        return (self.file, self.refresh, self.filter, self.sort, self.descending, self.episode, self.actions,
+                self.step, self.compare)
+
+    # --- controls ----------------------------------------------------------------------------
+    def _wire(self, on: Callable) -> None:
+        @on(self.file)
+        def _(event) -> None:
+            self._load(self.file.value)
+
+        @on(self.refresh)
+        def _(event) -> None:
+            names = self._file_names()
+            self.file.options = names
+            self.compare.options = (NONE,) + names
+            self._tell(event.client_id, f"{len([n for n in names if n != NONE])} result files in {self.source.results_dir}")
+
+        for handle in (self.filter, self.sort, self.descending):
+            on(handle)(lambda event: self._show_table())
+
+        @on(self.actions)
+        def _(event) -> None:
+            row = self._selected()
+            if self.actions.value == "Open":
+                self._open(row, event.client_id)
+            else:
+                self._rerun(row, event.client_id)
+
+        @on(self.step)
+        def _(event) -> None:
+            self._show_step(int(self.step.value))
+
+        @on(self.compare)
+        def _(event) -> None:
+            self._compare(self.compare.value)
+
+    def _file_names(self) -> tuple[str, ...]:
+        names = tuple(p.name for p in list_result_files(self.source.results_dir))
+        return names or (NONE,)
+
+    def _load(self, name: str) -> None:
+        """Show the file ``name``; a file that is not a result file leaves the last one shown and says why."""
+        if name == NONE:
+            raise L3MVNError(f"no result file in {self.source.results_dir}: run `l3mvn eval --out "
+                             f"{self.source.results_dir}/NAME.jsonl` first")
+        try:
+            loaded = load_result_file(self.source.results_dir / name)
+        except L3MVNError as exc:
+            self.notes.content = f"**{name}**: {exc}"
+            raise
+        self._file = loaded
+        left = f"; {len(loaded.problems)} lines left out: " + "; ".join(loaded.problems[:3]) if loaded.problems else ""
+        self.notes.content = f"**{name}**: {len(loaded.rows)} episodes{left}"
+        self.filter.options = filter_choices(loaded.rows)
+        self.filter.value = ALL
+        self._show_table()
+
+    def _show_table(self) -> None:
+        if self._file is None:
+            return
+        self._shown = select(self._file.rows, self.filter.value, self.sort.value, self.descending.value)
+        self.table.content = _table_html(self._shown)
+        self.summary.content = _summary_html(self._shown)
+        self.episode.options = tuple(r.label for r in self._shown) or (NONE,)
+
+    def _selected(self) -> EpisodeRow:
+        row = next((r for r in self._shown if r.label == self.episode.value), None)
+        if row is None:
+            raise L3MVNError("pick an episode first (the filter may have none)")
+        return row
+
+    def _open(self, row: EpisodeRow, client_id: int | None) -> None:
+        path = recording_of(self.source.recordings_dir, row)
+        if path is None:
+            self._clear_steps(f"no recording of {row.scene} episode {row.episode_id} ({row.policy}) in "
+                              f"{self.source.recordings_dir}: press Re-run live to run and record it")
+            raise L3MVNError(f"no recording of this episode in {self.source.recordings_dir}; press Re-run live")
+        pictures, decisions = recording_frames(path)
+        if not pictures:
+            raise L3MVNError(f"{path.name} holds no steps")
+        with self._lock:
+            self._frames, self._decisions = pictures, decisions
+        self.step.max = max(1, len(pictures) - 1)  # a slider needs two ends; _show_step clamps
+        self.step.value = 0
+        self.step.disabled = False
+        self._show_step(0)
+        self._tell(client_id, f"opened {path.name}: {len(pictures)} steps")
+
+    def _rerun(self, row: EpisodeRow, client_id: int | None) -> None:
+        s = self.source
+        self._tell(client_id, f"re-running {row.raw.get('key')} ({row.policy}); this takes a few seconds")
+        done = rerun(row.raw, dataset=s.dataset, split=s.split, houses=s.houses,
+                     episodes_per_house=s.episodes_per_house, seed=s.seed, record_dir=s.recordings_dir)
+        self.decision.content = done.summary
+        self._tell(client_id, done.summary, "info" if done.reproduced else "warning")
+        self._open(row, client_id)
+        self.decision.content = done.summary
+
+    def _show_step(self, k: int) -> None:
+        with self._lock:
+            if not self._frames:
+                return
+            k = min(max(k, 0), len(self._frames) - 1)
+            picture, line = self._frames[k], self._decisions[k]
+        self.picture.image = picture
+        self.decision.content = line
+
+    def _clear_steps(self, note: str) -> None:
+        with self._lock:
+            self._frames, self._decisions = [], []
+        self.step.disabled = True
+        self.picture.image = np.zeros((8, 8, 3), np.uint8)
+        self.decision.content = note
+
+    def _compare(self, name: str) -> None:
+        if name == NONE or self._file is None:
+            self.comparison.content = ""
+            return
+        other = load_result_file(self.source.results_dir / name)
+        only_a, only_b = solved_by_one(self._file.rows, other.rows)
+        here = self._file.path.name
+        self.comparison.content = (f"Solved by **{here}** only ({len(only_a)}): "
+                                   + (", ".join(r.raw["key"] for r in only_a) or "none")
+                                   + f"\n\nSolved by **{name}** only ({len(only_b)}): "
+                                   + (", ".join(r.raw["key"] for r in only_b) or "none"))
+
+
+def _number(v: float | None, digits: int = 2) -> str:
+    return "-" if v is None else f"{v:.{digits}f}"
+
+
+_TABLE_STYLE = ("font-size:11px;border-collapse:collapse;white-space:nowrap", "padding:1px 4px;text-align:left")
+_COLUMNS = ("#", "scene", "ep", "goal", "ok", "SPL", "DTG", "steps", "cause", "cov")
+
+
+def _html_table(head: tuple[str, ...], rows: list[tuple], caption: str = "") -> str:
+    table, cell = _TABLE_STYLE
+    th = "".join(f"<th style='{cell}'>{escape(h)}</th>" for h in head)
+    body = "".join("<tr>" + "".join(f"<td style='{cell}'>{v if isinstance(v, _Raw) else escape(str(v))}</td>"
+                                    for v in row) + "</tr>" for row in rows)
+    cap = f"<div style='font-size:12px;font-weight:600;margin-top:6px'>{escape(caption)}</div>" if caption else ""
+    return f"{cap}<div style='overflow-x:auto'><table style='{table}'><tr>{th}</tr>{body}</table></div>"
+
+
+class _Raw(str):
+    """Markup the table puts in a cell as is (a bar chart)."""
+
+
+def _table_html(rows: list[EpisodeRow]) -> str:
+    if not rows:
+        return "<i>no episode matches the filter</i>"
+    cells = [(r.index, r.scene.removeprefix("procedural-"), r.episode_id, r.goal, "yes" if r.success else "no",
+              _number(r.spl), _number(r.dtg, 1), r.steps, r.failure, _number(r.coverage)) for r in rows[:TABLE_ROWS]]
+    more = f"<div style='font-size:11px'>{len(rows) - TABLE_ROWS} more in the Episode list</div>" if len(rows) > TABLE_ROWS else ""
+    policies = ", ".join(sorted({r.policy for r in rows}))
+    return _html_table(_COLUMNS, cells, f"{len(rows)} episodes ({policies})") + more
+
+
+def _bar(fraction: float, colour: str = "#2860c8", width: int = 80) -> _Raw:
+    w = round(max(0.0, min(1.0, fraction)) * width)
+    return _Raw(f"<span style='display:inline-block;width:{width}px;height:8px;background:#ddd'>"
+                f"<span style='display:block;width:{w}px;height:8px;background:{colour}'></span></span>")
+
+
+def _summary_html(rows: list[EpisodeRow]) -> str:
+    if not rows:
+        return ""
+    out = []
+    for by in ("goal", "scene"):
+        groups, causes = summaries(rows, by)
+        out.append(_html_table((by, "eps", "SR", "", "SPL"),
+                               [(g, n, _bar(sr), f"{sr:.2f}", f"{spl:.2f}") for g, (n, sr, spl) in groups.items()],
+                               f"Per {'category' if by == 'goal' else by}"))
+    total = sum(causes.values())
+    out.append(_html_table(("outcome", "", "episodes"),
+                           [(c, _bar(n / total, "#28a046" if c == "success" else "#c83030"), n)
+                            for c, n in causes.items()], "Per outcome"))
+    return "".join(out)

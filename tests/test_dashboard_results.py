@@ -1,0 +1,141 @@
+"""The results browser's data (app/results.py): reading eval result files, filters, summaries, the
+comparison of two files, and the re-run of a result line (same seed, same result)."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from app.results import (
+    FAILURES,
+    filter_choices,
+    list_result_files,
+    load_result_file,
+    recording_frames,
+    recording_of,
+    rerun,
+    select,
+    solved_by_one,
+    summaries,
+)
+from l3mvn.errors import L3MVNError
+
+HOUSES, PER_HOUSE, SEED = 1, 3, 0
+EVAL = ["--houses", str(HOUSES), "--episodes-per-house", str(PER_HOUSE), "--seed", str(SEED),
+        "--frame", "60x80", "--set", "sim.max_steps=40"]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _eval(out: Path, policy: str, *extra: str) -> None:
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
+    subprocess.run([sys.executable, "-m", "app.cli", "eval", "--policy", policy, *EVAL, "--out", str(out), *extra],
+                   check=True, capture_output=True, env=env, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def evaluated(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("results")
+    _eval(d / "frontier.jsonl", "frontier", "--record", "--record-dir", str(d / "rec"))
+    _eval(d / "cost-utility.jsonl", "cost-utility")
+    return d
+
+
+def test_a_result_file_reads_filters_sorts_and_sums(evaluated):
+    assert [p.name for p in list_result_files(evaluated)] == ["cost-utility.jsonl", "frontier.jsonl"]
+    f = load_result_file(evaluated / "frontier.jsonl")
+    assert len(f.rows) == HOUSES * PER_HOUSE and f.problems == ()
+    choices = filter_choices(f.rows)
+    assert choices[:3] == ("all", "failures", "successes")
+    failed = select(f.rows, FAILURES)
+    assert all(not r.success for r in failed) and len(failed) == sum(not r.success for r in f.rows)
+    for cause in (c for c in choices if c.startswith("cause: ")):
+        assert {r.failure for r in select(f.rows, cause)} == {cause[7:]}
+    by_steps = select(f.rows, "all", "steps", descending=True)
+    assert [r.steps for r in by_steps] == sorted((r.steps for r in f.rows), reverse=True)
+    per_goal, causes = summaries(list(f.rows))
+    assert sum(n for n, _, _ in per_goal.values()) == len(f.rows) == sum(causes.values())
+    with pytest.raises(L3MVNError, match="unknown filter 'nope'; choose one of all, failures"):
+        select(f.rows, "nope")
+
+
+def test_bad_files_and_lines_are_one_line_problems(evaluated, tmp_path):
+    good = (evaluated / "frontier.jsonl").read_text().splitlines()
+    mixed = tmp_path / "mixed.jsonl"
+    mixed.write_text("\n".join([good[0], "{not json", json.dumps({"key": "x", "error": "boom\nmore"}),
+                                json.dumps({**json.loads(good[1]), "spl": "high"})]) + "\n")
+    f = load_result_file(mixed)
+    assert len(f.rows) == 1
+    assert f.problems[0] == "line 2: not JSON" and "failed to run: boom" in f.problems[1]
+    assert f.problems[2].startswith("line 4: ") and "spl" in f.problems[2]
+    assert all("\n" not in p for p in f.problems)
+    notes = tmp_path / "notes.jsonl"
+    notes.write_text("hello\n")
+    with pytest.raises(L3MVNError, match=r"^notes.jsonl is not an eval result file: no episode line \(line 1: not JSON\)$"):
+        load_result_file(notes)
+
+
+def test_two_files_list_the_episodes_only_one_solved(evaluated):
+    a = load_result_file(evaluated / "frontier.jsonl").rows
+    b = load_result_file(evaluated / "cost-utility.jsonl").rows
+    only_a, only_b = solved_by_one(a, b)
+    solved_b = {r.raw["key"] for r in b if r.success}
+    assert {r.raw["key"] for r in only_a} == {r.raw["key"] for r in a if r.success} - solved_b
+    assert {r.raw["key"] for r in only_b} == solved_b - {r.raw["key"] for r in a if r.success}
+
+
+def test_a_recording_reads_back_one_picture_per_step(evaluated):
+    row = load_result_file(evaluated / "frontier.jsonl").rows[0]
+    path = recording_of(evaluated / "rec", row)
+    assert path is not None
+    pictures, decisions = recording_frames(path)
+    assert len(pictures) == len(decisions) == row.steps + 1  # the reset, then one per action
+    assert decisions[3].startswith("step 3: ") and pictures[0].ndim == 3
+
+
+def test_rerun_with_the_stored_config_and_seed_gives_the_stored_result(evaluated, tmp_path):
+    for row in load_result_file(evaluated / "frontier.jsonl").rows:
+        done = rerun(row.raw, dataset=None, split="val", houses=HOUSES, episodes_per_house=PER_HOUSE, seed=SEED)
+        assert done.same_config and done.reproduced, done.summary
+        for field in ("success", "spl", "dtg", "steps", "failure", "path_length_m"):
+            assert done.row[field] == row.raw[field], field
+    edited = {**row.raw, "config": {**row.raw["config"], "sim": {**row.raw["config"]["sim"], "max_steps": 5}}}
+    other = rerun(edited, dataset=None, split="val", houses=HOUSES, episodes_per_house=PER_HOUSE, seed=SEED)
+    assert not other.same_config and not other.reproduced and other.row["steps"] <= 5
+    assert "DIFFERENT result from stored" in other.summary and "config hash differs" in other.summary
+    with pytest.raises(L3MVNError, match="is not in this dashboard's episode set"):
+        rerun({**row.raw, "key": "procedural-0099/0/0"}, dataset=None, split="val", houses=HOUSES,
+              episodes_per_house=PER_HOUSE, seed=SEED)
+    with pytest.raises(L3MVNError, match="stores no config"):
+        rerun({k: v for k, v in row.raw.items() if k != "config"}, dataset=None, split="val", houses=HOUSES,
+              episodes_per_house=PER_HOUSE, seed=SEED)
+
+
+def test_the_panel_starts_on_a_folder_whose_first_file_is_not_results(evaluated, tmp_path):
+    from app.server import start_dashboard
+
+    (tmp_path / "a_notes.jsonl").write_text("not results\n")
+    (tmp_path / "b.jsonl").write_text((evaluated / "frontier.jsonl").read_text())
+    dash = start_dashboard(port=_free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, results_dir=tmp_path,
+                           recordings_dir=evaluated / "rec")
+    try:
+        panel = dash.view.results
+        assert panel._file is None and "a_notes.jsonl is not an eval result file" in panel.notes.content
+        panel._load("b.jsonl")
+        panel.episode.value = panel._shown[0].label
+        panel._open(panel._selected(), None)
+        assert panel.step.max == panel._shown[0].steps and panel.decision.content.startswith("step 0: ")
+    finally:
+        dash.stop()
+    with pytest.raises(L3MVNError, match="--results .* is not a folder"):
+        start_dashboard(port=_free_port(), results_dir=tmp_path / "absent")
