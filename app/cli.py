@@ -14,6 +14,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from l3mvn.registry import POLICY_NAMES
 
     parser.add_argument("--dataset", default=None, help="SemExp-format dataset directory (default: procedural houses)")
+    parser.add_argument("--scenes", default=None, metavar="DIR",
+                        help="scan root of a habitat ObjectNav --dataset (e.g. data/scene_datasets)")
     parser.add_argument("--split", default="val", help="split name inside --dataset (default: val)")
     parser.add_argument("--houses", type=int, default=3, help="procedural houses when no --dataset (default 3)")
     parser.add_argument("--episodes-per-house", type=int, default=5, help="procedural episodes per house (default 5)")
@@ -46,12 +48,16 @@ def run(args: argparse.Namespace) -> int:
     """
     from app.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS
     from app.server import start_dashboard
-    from l3mvn.config import Config, override
+    from l3mvn.config import Config, TaskConfig, override
+    from l3mvn.datasets.objectnav import dataset_rule
     from l3mvn.serving import interrupt_on_stop_signals
 
     with interrupt_on_stop_signals():
         try:
-            dash = start_dashboard(cfg=override(Config(), args.set), dataset=args.dataset, split=args.split,
+            # The dataset's own success rule (HM3D / MP3D view points, else SemExp's), as `l3mvn eval` takes it.
+            cfg = Config(task=TaskConfig(success_rule=dataset_rule(args.dataset, args.split)))
+            dash = start_dashboard(cfg=override(cfg, args.set), dataset=args.dataset, split=args.split,
+                                   scenes_dir=args.scenes,
                                    policy=args.policy, host=args.host, port=args.port, houses=args.houses,
                                    episodes_per_house=args.episodes_per_house, seed=args.seed,
                                    steps_per_second=args.speed, record=args.record, record_dir=args.record_dir,

@@ -48,12 +48,13 @@ def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", po
                     steps_per_second: float = 4.0, record: bool = False,
                     record_dir: str | Path = "recordings", verbose: bool = False,
                     allow_origins: Iterable[str] = (), results_dir: str | Path | None = None,
-                    recordings_dir: str | Path | None = None) -> Dashboard:
+                    recordings_dir: str | Path | None = None, scenes_dir: str | Path | None = None) -> Dashboard:
     """Load the episodes, start the worker and serve the page (returns at once; threads run it).
 
     Only pages served from this dashboard's own address, or from one of ``allow_origins`` (a reverse
     proxy's public origin, ``https://host[:port]``), may connect: see app/origin.py.
 
+    ``scenes_dir`` is the scan root of a habitat ObjectNav ``dataset`` (as ``l3mvn eval --scenes``).
     ``results_dir`` adds the Results panel over the eval result files in that folder (their recordings
     are looked up in ``recordings_dir``, default ``record_dir``; re-runs use this episode set and seed).
 
@@ -69,7 +70,7 @@ def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", po
         log.warning("serving on %s: anyone who can reach this machine can drive the dashboard; browsers "
                     "that open it by another name need %s http://NAME:%d", host, ALLOW_ORIGIN_FLAG, port)
     episodes = load_episode_set(dataset, split, houses=houses, episodes_per_house=episodes_per_house,
-                                seed=seed, cfg=cfg)
+                                seed=seed, cfg=cfg, scenes_dir=scenes_dir)
     controller = DashboardController(episodes, cfg, policy=policy, seed=seed,
                                      steps_per_second=steps_per_second, record_dir=record_dir)
     try:
