@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import socket
 from pathlib import Path
 
 import numpy as np
@@ -83,3 +84,10 @@ def shut_dataset(tmp_path: Path) -> Path:
 
 needs_gibson = pytest.mark.skipif(not (GIBSON / "train" / "train_info.pbz2").exists(),
                                   reason="../shared Gibson maps not present")
+
+
+def free_port() -> int:
+    """A loopback port nothing listens on right now (for a dashboard or viewer under test)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

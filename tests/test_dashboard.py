@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 
 import pytest
 
+from conftest import free_port
 from app.server import start_dashboard
 from app.state import Notice
 from app.views import cell_to_xy, ray_to_cell
@@ -18,15 +18,9 @@ from l3mvn.events import StepEvent
 SMALL = Config(sim=SimConfig().with_frame(120, 160))
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=_free_port(), houses=1, episodes_per_house=3, cfg=SMALL, policy="oracle")
+    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=3, cfg=SMALL, policy="oracle")
     yield d
     d.stop()
 

@@ -10,7 +10,6 @@ import math
 import os
 import re
 import shutil
-import socket
 import time
 from pathlib import Path
 
@@ -36,6 +35,7 @@ CHROMIUM = _find_chromium()
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
                                                          "`playwright install chromium` runs these tests")
 
+from conftest import free_port
 from app.server import start_dashboard  # noqa: E402
 from app.views import cell_to_xy  # noqa: E402
 from l3mvn.config import Config  # noqa: E402
@@ -43,12 +43,6 @@ from l3mvn.config import Config  # noqa: E402
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
 VIEWPORT = {"width": 1400, "height": 900}
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _wait(predicate, timeout: float = 10.0, what: str = "condition") -> None:
@@ -81,7 +75,7 @@ def _screen_point(page, client, x: float, y: float) -> tuple[float, float]:
 
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=_free_port(), houses=1, episodes_per_house=2, policy="frontier",
+    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="frontier",
                         cfg=Config().with_frame(240, 320))
     yield d
     d.stop()

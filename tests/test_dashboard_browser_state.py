@@ -17,8 +17,9 @@ import pytest
 
 sync_api = pytest.importorskip("playwright.sync_api")
 
+from conftest import free_port
 from test_dashboard_browser import (  # noqa: E402  (after the skip: it needs playwright too)
-    CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _free_port, _panel_text, _step_shown, _wait,
+    CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_text, _step_shown, _wait,
 )
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
@@ -32,7 +33,7 @@ from l3mvn.config import Config  # noqa: E402
 
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=_free_port(), houses=1, episodes_per_house=3, policy="frontier",
+    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=3, policy="frontier",
                         cfg=Config().with_frame(240, 320))
     yield d
     d.stop()
@@ -180,7 +181,7 @@ def test_a_scorer_without_weights_is_shown_unavailable_and_refused_at_once(dash,
 
 
 def test_target_and_step_before_an_episode_explain_themselves(dash, browser, tmp_path):
-    fresh = start_dashboard(port=_free_port(), houses=1, episodes_per_house=2, policy="frontier",
+    fresh = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="frontier",
                             cfg=Config().with_frame(120, 160))
     page = browser.new_page(viewport=VIEWPORT)
     try:

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
+from conftest import free_port
 from app.results import (
     FAILURES,
     filter_choices,
@@ -29,12 +29,6 @@ from l3mvn.errors import L3MVNError
 HOUSES, PER_HOUSE, SEED = 1, 3, 0
 EVAL = ["--houses", str(HOUSES), "--episodes-per-house", str(PER_HOUSE), "--seed", str(SEED),
         "--frame", "60x80", "--set", "sim.max_steps=40"]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _eval(out: Path, policy: str, *extra: str) -> None:
@@ -126,7 +120,7 @@ def test_the_panel_starts_on_a_folder_whose_first_file_is_not_results(evaluated,
 
     (tmp_path / "a_notes.jsonl").write_text("not results\n")
     (tmp_path / "b.jsonl").write_text((evaluated / "frontier.jsonl").read_text())
-    dash = start_dashboard(port=_free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, results_dir=tmp_path,
+    dash = start_dashboard(port=free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, results_dir=tmp_path,
                            recordings_dir=evaluated / "rec")
     try:
         panel = dash.view.results
@@ -138,4 +132,4 @@ def test_the_panel_starts_on_a_folder_whose_first_file_is_not_results(evaluated,
     finally:
         dash.stop()
     with pytest.raises(L3MVNError, match="--results .* is not a folder"):
-        start_dashboard(port=_free_port(), results_dir=tmp_path / "absent")
+        start_dashboard(port=free_port(), results_dir=tmp_path / "absent")

@@ -17,11 +17,11 @@ import pytest
 
 sync_api = pytest.importorskip("playwright.sync_api")
 
+from conftest import free_port
 from test_dashboard_browser import (
     CHROMIUM,
     CHROMIUM_ARGS,
     VIEWPORT,
-    _free_port,
     _panel_text,
     _wait,
 )
@@ -44,7 +44,7 @@ def dash(tmp_path_factory):
                     "--out", str(d / "frontier.jsonl"), "--record", "--record-dir", str(d / "rec")],
                    check=True, capture_output=True, env=env, timeout=900)
     (d / "notes.jsonl").write_text("these are my notes, not results\n")
-    dash = start_dashboard(port=_free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, policy="frontier",
+    dash = start_dashboard(port=free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, policy="frontier",
                            results_dir=d, recordings_dir=d / "rec")
     yield dash
     dash.stop()

@@ -7,7 +7,6 @@ recording reads back with every step.
 
 from __future__ import annotations
 
-import socket
 import time
 
 import pytest
@@ -15,6 +14,7 @@ import pytest
 pytest.importorskip("trimesh")
 pytest.importorskip("embreex")
 
+from conftest import free_port
 from app.cli import add_arguments, run  # noqa: E402
 from app.server import start_dashboard  # noqa: E402
 from l3mvn.config import Config, TaskConfig  # noqa: E402
@@ -22,12 +22,6 @@ from l3mvn.datasets.hm3d_export import export_hm3d  # noqa: E402
 from l3mvn.recording import read_recording  # noqa: E402
 
 HM3D = Config(task=TaskConfig(success_rule="hm3d")).with_frame(120, 160)
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +32,7 @@ def exported(tmp_path_factory):
 
 
 def test_the_dashboard_runs_and_records_an_episode_of_a_scan_dataset(exported, tmp_path):
-    dash = start_dashboard(port=_free_port(), dataset=exported / "objectnav_hm3d_v2", split="val",
+    dash = start_dashboard(port=free_port(), dataset=exported / "objectnav_hm3d_v2", split="val",
                            scenes_dir=exported / "scene_datasets", cfg=HM3D, policy="oracle",
                            record=True, record_dir=tmp_path)
     try:
@@ -66,7 +60,7 @@ def test_serve_reads_the_dataset_rule_and_a_missing_scan_root_is_one_line(export
     parser = argparse.ArgumentParser()
     add_arguments(parser)
     args = parser.parse_args(["--dataset", str(exported / "objectnav_hm3d_v2"), "--scenes",
-                              str(exported / "nowhere"), "--port", str(_free_port())])
+                              str(exported / "nowhere"), "--port", str(free_port())])
     assert run(args) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error:") and "\n" not in err and "nowhere" in err

@@ -9,7 +9,6 @@ from __future__ import annotations
 import http.client
 import logging
 import math
-import socket
 import time
 
 import msgspec
@@ -19,6 +18,7 @@ import zstandard
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
+from conftest import free_port
 from app.cli import serve_main
 from app.origin import OriginPolicy
 from app.server import start_dashboard
@@ -32,12 +32,6 @@ TIMEOUT_S = 15.0  # generous: the suite may share two slow cores
 SUBPROTOCOL = f"viser-v{viser.__version__}"  # viser refuses a page of another version
 CAMERA = {"wxyz": [1.0, 0.0, 0.0, 0.0], "position": [0.0, 0.0, 5.0], "fov": 1.0, "near": 0.01, "far": 100.0,
           "image_height": 600, "image_width": 800, "look_at": [0.0, 0.0, 0.0], "up_direction": [0.0, 1.0, 0.0]}
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _wait(predicate, what: str, timeout: float = TIMEOUT_S):
@@ -131,7 +125,7 @@ def _connect(dash, origin: str | None) -> ClientConnection:
 
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=_free_port(), houses=1, episodes_per_house=2, cfg=SMALL, policy="oracle")
+    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, cfg=SMALL, policy="oracle")
     yield d
     d.stop()
 
@@ -201,7 +195,7 @@ def test_a_dns_rebound_host_name_is_refused_even_for_the_page(dash):
 
 
 def test_allow_origin_admits_a_reverse_proxy_and_nothing_more():
-    d = start_dashboard(port=_free_port(), houses=1, episodes_per_house=1, cfg=SMALL, policy="oracle",
+    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=1, cfg=SMALL, policy="oracle",
                         allow_origins=["https://Studio.Example.com/"])
     try:
         ws = _connect(d, "https://studio.example.com")
@@ -221,7 +215,7 @@ def test_allow_origin_admits_a_reverse_proxy_and_nothing_more():
 def test_an_allow_origin_that_is_not_an_origin_is_refused_before_anything_starts(bad, capsys):
     with pytest.raises(L3MVNError, match="is not an origin"):
         OriginPolicy("127.0.0.1", [bad])
-    assert serve_main(["--allow-origin", bad, "--port", str(_free_port())]) == 2
+    assert serve_main(["--allow-origin", bad, "--port", str(free_port())]) == 2
     assert "is not an origin; give scheme://host[:port]" in capsys.readouterr().err
 
 
@@ -237,7 +231,7 @@ def test_a_viser_that_starts_its_server_another_way_is_stopped_not_served_unguar
 
     monkeypatch.setattr(viser, "ViserServer", ServerStartedElsewhere)
     with pytest.raises(L3MVNError, match="cannot check Origin headers"):
-        start_checked_server(lambda *request: None, port=_free_port(), verbose=False)
+        start_checked_server(lambda *request: None, port=free_port(), verbose=False)
     assert stopped == [True]
 
 
@@ -245,7 +239,7 @@ def test_a_check_that_fails_refuses_the_request(caplog):
     def broken(origins, hosts, port):
         raise RuntimeError("bug in the check")
 
-    server = start_checked_server(broken, host="127.0.0.1", port=_free_port(), verbose=False)
+    server = start_checked_server(broken, host="127.0.0.1", port=free_port(), verbose=False)
     try:
         with pytest.raises(InvalidStatus) as refused:
             connect(f"ws://127.0.0.1:{server.get_port()}", subprotocols=[SUBPROTOCOL], open_timeout=TIMEOUT_S)

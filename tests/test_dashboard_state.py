@@ -7,12 +7,12 @@ against the model hub, a manual goal showed its wire token and outlived Clear.
 
 from __future__ import annotations
 
-import socket
 import time
 
 import numpy as np
 import pytest
 
+from conftest import free_port
 from app.map_image import TARGET_RINGS
 from app.model_weights import model_problem, scorer_problems
 from app.server import start_dashboard
@@ -30,15 +30,9 @@ from l3mvn.viz import category_color
 SMALL = Config(sim=SimConfig().with_frame(120, 160))
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=_free_port(), houses=1, episodes_per_house=3, cfg=SMALL, policy="oracle")
+    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=3, cfg=SMALL, policy="oracle")
     yield d
     d.stop()
 

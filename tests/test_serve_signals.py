@@ -24,6 +24,7 @@ import psutil
 import pytest
 from conftest import draw_two_room_house
 
+from conftest import free_port
 from l3mvn.config import Config, SimConfig
 from l3mvn.episodes import generate_episodes
 from l3mvn.errors import L3MVNError
@@ -128,12 +129,6 @@ def cli():
         c.kill_all()
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _accepts(port: int) -> bool:
     """Something listens on 127.0.0.1:``port``."""
     with socket.socket() as s:
@@ -181,7 +176,7 @@ def _one_error_line(c: Cli) -> str:
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
 def test_serve_stops_cleanly_on_sigterm_and_sighup_and_frees_its_port(cli, sig):
-    port = _free_port()
+    port = free_port()
     c = cli(*SERVE, "--port", str(port))
     c.wait_for(rf"L3MVN Studio dashboard: http://127\.0\.0\.1:{port}\b")
     assert _accepts(port)
@@ -211,7 +206,7 @@ def test_serve_on_a_busy_port_refuses_naming_it_instead_of_taking_the_next(cli):
     (["--host", "no.such.host.invalid"], "--host no.such.host.invalid: cannot resolve it"),
 ])
 def test_serve_with_a_bad_port_or_host_is_one_line_and_status_2(cli, argv, message):
-    line = _one_error_line(cli(*SERVE, *argv, *([] if "--port" in argv else ["--port", str(_free_port())])))
+    line = _one_error_line(cli(*SERVE, *argv, *([] if "--port" in argv else ["--port", str(free_port())])))
     assert message in line
 
 
@@ -254,7 +249,7 @@ def _serving_viewer(cli, recording: Path) -> tuple[Cli, int, int, list[psutil.Pr
         viewer_executable()
     except L3MVNError as exc:
         pytest.skip(f"the rerun web viewer cannot run here: {exc}")
-    c = cli("replay", str(recording), "--web", "--port", str(_free_port()))
+    c = cli("replay", str(recording), "--web", "--port", str(free_port()))
     ports = c.wait_for(r"HTTP port (\d+), data port (\d+)")
     web, data = int(ports.group(1)), int(ports.group(2))
     if not _poll(lambda: c.proc.poll() is not None or (_accepts(web) and _accepts(data)), START_S) \
