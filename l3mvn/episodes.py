@@ -149,7 +149,7 @@ def _check_scene_id(where: str, path: Path, rec: dict, scene: SceneMap) -> None:
 def _start_pose(where: str, scene: SceneMap, position: object, rotation: object) -> Pose:
     """The start in our frame: 3 finite numbers on the map's navigable floor, a unit yaw quaternion."""
     pos = _finite_numbers(where, "start_position", position, 3, "(p0, p1 up, p2)")
-    rot = _yaw_quaternion(where, rotation)
+    rot = yaw_quaternion(where, rotation)
     try:
         start = scene.pose_from_habitat(pos, rot)
     except L3MVNError as exc:
@@ -163,17 +163,23 @@ def _start_pose(where: str, scene: SceneMap, position: object, rotation: object)
     return start
 
 
-def _yaw_quaternion(where: str, value: object) -> list[float]:
-    """(w, x, y, z) of a rotation about the up axis, normalised; see the tolerances above."""
-    quat = _finite_numbers(where, "start_rotation", value, 4, "(w, x, y, z)")
+def yaw_quaternion(where: str, value: object, order: str = "wxyz") -> list[float]:
+    """(w, x, y, z) of a rotation about the up axis, normalised; see the tolerances above. ``order``
+    is how the file writes it: our files (w, x, y, z), habitat's ObjectNav files (x, y, z, w)."""
+    shown = "(w, x, y, z)" if order == "wxyz" else "(x, y, z, w)"
+    quat = _finite_numbers(where, "start_rotation", value, 4, shown)
     norm = math.sqrt(sum(v * v for v in quat))
     if not abs(norm - 1.0) <= ROTATION_NORM_TOLERANCE:
-        raise L3MVNError(f"{where}: start_rotation {_show(value)} must be a unit quaternion (w, x, y, z); "
+        raise L3MVNError(f"{where}: start_rotation {_show(value)} must be a unit quaternion {shown}; "
                          f"its norm is {norm:.3g}")
-    w, x, y, z = (v / norm for v in quat)
+    quat = [v / norm for v in quat]
+    w, x, y, z = quat if order == "wxyz" else quat[3:] + quat[:3]
     if max(abs(x), abs(z)) > ROTATION_TILT_TOLERANCE:
+        about_up = "w, 0, y, 0" if order == "wxyz" else "0, y, 0, w"
+        hint = "; is the file in (x, y, z, w) order?" if order == "wxyz" else ""
+        whose = "" if order == "wxyz" else "habitat's "
         raise L3MVNError(f"{where}: start_rotation {_show(value)} must be a rotation about the up axis "
-                         "(w, 0, y, 0 in (w, x, y, z) order); is the file in (x, y, z, w) order?")
+                         f"({about_up} in {whose}{shown} order){hint}")
     return [w, x, y, z]
 
 

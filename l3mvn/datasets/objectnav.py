@@ -22,7 +22,7 @@ import numpy as np
 
 from l3mvn.config import Config
 from l3mvn.datasets import EpisodeSet
-from l3mvn.episodes import _finite_numbers, _geodesic, _show, _whole_number, read_json_gz
+from l3mvn.episodes import _finite_numbers, _geodesic, _show, _whole_number, read_json_gz, yaw_quaternion
 from l3mvn.errors import L3MVNError
 from l3mvn.scenes.categories import goal_category
 from l3mvn.scenes.scan import ScanFiles, ScanFloor, floor_at, load_scan, scene_up_axis
@@ -37,7 +37,6 @@ FORMAT_RULES: dict[str, str] = {
 # navigable floor moves onto it; farther is an error.
 START_SNAP_M = 0.25
 _ID_LIMIT = 2**63
-_QUAT_TOLERANCE = 0.01  # as episodes.ROTATION_NORM_TOLERANCE / ROTATION_TILT_TOLERANCE
 
 
 def split_file(dataset: str | Path, split: str) -> Path:
@@ -222,7 +221,7 @@ class _Record:
     where: str
     episode_id: int
     position: list[float]
-    rotation_xyzw: tuple[float, float, float, float]
+    rotation_wxyz: list[float]
     goal: str
     geodesic_m: float
 
@@ -247,7 +246,7 @@ def _records(scene_id: str, entries: list[tuple[Path, int, dict]]) -> list[_Reco
         where = f"{where} (id {episode_id})"
         out.append(_Record(
             where, episode_id, _finite_numbers(where, "start_position", rec["start_position"], 3, "[x, y up, z]"),
-            _yaw_quaternion_xyzw(where, rec["start_rotation"]), goal_category(rec["object_category"], where),
+            yaw_quaternion(where, rec["start_rotation"], order="xyzw"), goal_category(rec["object_category"], where),
             _geodesic(where, rec.get("info")),
         ))
     return out
@@ -255,25 +254,10 @@ def _records(scene_id: str, entries: list[tuple[Path, int, dict]]) -> list[_Reco
 
 def _place(rec: _Record, floors: dict[int, ScanFloor]) -> Episode:
     """The episode in our frame, on the floor below its start."""
-    x, y, z, w = rec.rotation_xyzw
     floor = floor_at(floors, rec.position[1])
-    start = _on_navigable(rec.where, floor, floor.pose_from_habitat(rec.position, [w, x, y, z]))
+    start = _on_navigable(rec.where, floor, floor.pose_from_habitat(rec.position, rec.rotation_wxyz))
     return Episode(episode_id=rec.episode_id, scene=floor.name, floor=floor.floor, start=start, goal=rec.goal,
                    object_id=-1, geodesic_distance_m=rec.geodesic_m)
-
-
-def _yaw_quaternion_xyzw(where: str, value: object) -> tuple[float, float, float, float]:
-    """Habitat's ``start_rotation`` (x, y, z, w) about the up axis, normalised."""
-    quat = _finite_numbers(where, "start_rotation", value, 4, "(x, y, z, w)")
-    norm = math.sqrt(sum(v * v for v in quat))
-    if not abs(norm - 1.0) <= _QUAT_TOLERANCE:
-        raise L3MVNError(f"{where}: start_rotation {_show(value)} must be a unit quaternion (x, y, z, w); "
-                         f"its norm is {norm:.3g}")
-    x, y, z, w = (v / norm for v in quat)
-    if max(abs(x), abs(z)) > _QUAT_TOLERANCE:
-        raise L3MVNError(f"{where}: start_rotation {_show(value)} must be a rotation about the up axis "
-                         "(0, y, 0, w in habitat's (x, y, z, w) order)")
-    return x, y, z, w
 
 
 def _on_navigable(where: str, floor: ScanFloor, pose: Pose) -> Pose:
