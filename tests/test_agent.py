@@ -395,7 +395,8 @@ def test_a_kept_frontier_names_why_it_was_chosen_once_not_once_per_keep():
     goals = ExplorationGoals(NearestFrontier(), config, LocalPlanner(config.planner, config.map.resolution_m))
     cells = np.zeros((1, 2), np.int64)
     goals.frontiers = [Frontier(k, cells, (100, 100 + 40 * k), 5, 1.0, 1.0, 1.0, 0.5) for k in range(2)]
-    goals.cell, goals.frontier, goals.reason = (100, 100), 0, "nearest frontier (1.0 m)"
+    goals.cell, goals.frontier = (100, 100), 0
+    goals.reason = goals._chosen_reason = "nearest frontier (1.0 m)"
     for _ in range(3):
         sel = goals._commit(Selection(1, (100, 140), np.array([0.5, 0.6]), "nearest frontier (0.9 m)"))
         assert sel.frontier == 0

@@ -41,6 +41,7 @@ class ExplorationGoals:
         self.kind = GoalKind.NONE
         self.frontier: int | None = None  # index into ``frontiers`` of the chosen frontier
         self.reason = ""
+        self._chosen_reason = ""  # why the frontier being kept was first chosen
         self.frontiers: list[Frontier] = []
         self.blocked: list[Cell] = []  # done goals: no frontier is taken near them again
         self.stood: set[Cell] = set()  # done goals the agent stood on and looked beyond
@@ -131,10 +132,12 @@ class ExplorationGoals:
             self.kind, self.frontier = GoalKind.EXPLORE, None
             self.reason = "no frontier: exploring a random free cell"
             return
-        sel = self._commit(sel)
-        self.cell, self.frontier = sel.cell, sel.frontier
-        self.kind = GoalKind.FRONTIER if sel.frontier is not None else GoalKind.RANDOM
-        self.reason = sel.reason
+        kept = self._commit(sel)
+        if kept is sel:  # a new choice: what a later keep quotes
+            self._chosen_reason = sel.reason
+        self.cell, self.frontier = kept.cell, kept.frontier
+        self.kind = GoalKind.FRONTIER if kept.frontier is not None else GoalKind.RANDOM
+        self.reason = kept.reason
 
     def _commit(self, sel: Selection) -> Selection:
         """Hysteresis: stay with the frontier pursued so far unless the new best is clearly better
@@ -148,16 +151,8 @@ class ExplorationGoals:
             return sel
         if sel.scores[sel.frontier] - sel.scores[j] < self.cfg.commitment_margin:
             f = self.frontiers[j]
-            return Selection(j, f.center, sel.scores, f"kept frontier {f.id} (commitment): {_first_reason(self.reason)}")
+            return Selection(j, f.center, sel.scores, f"kept frontier {f.id} (commitment): {self._chosen_reason}")
         return sel
-
-
-def _first_reason(reason: str) -> str:
-    """The reason a frontier was first chosen, without the commitment prefixes of later keeps (a
-    kept reason quoted itself at every re-selection: "kept frontier 1 (commitment): kept ...")."""
-    while reason.startswith("kept frontier ") and " (commitment): " in reason:
-        reason = reason.split(" (commitment): ", 1)[1]
-    return reason
 
 
 def _with_language(frontiers: list[Frontier], sel: Selection) -> list[Frontier]:
