@@ -24,7 +24,7 @@ from l3mvn.recording.video import VideoOptions, frames, read_episode
 
 ALL, FAILURES, SUCCESSES = "all", "failures", "successes"
 SORT_KEYS = ("row", "scene", "goal", "success", "spl", "dtg", "steps", "failure", "coverage")
-FRAME_HEIGHT = 240  # pixels of the recording's camera and map panels in the page
+FRAME_HEIGHT = 320  # pixels of the recording's camera and map panels (drawn over the main view: readable)
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,8 @@
 Pick a file (only files in that folder are offered), filter and sort its episodes, read summaries per
 category and failure cause, open an episode's recording and scrub its steps, or, without one, re-run
 it here with the config stored in its line (recorded, so it then opens like any other). A second file
-can be compared: the episodes one solved and the other did not.
+can be compared: the episodes one solved and the other did not, and any episode in both side by side
+(the Compare folder's view, each line with its stored config and policy).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
+from app.compare_view import ComparePanel, main_view_html
 from app.results import (
     ALL,
     SORT_KEYS,
@@ -60,9 +62,11 @@ class ResultsSource:
 class ResultsPanel:
     """Builds the Results folder in the GUI and answers its controls (one state shared by every tab)."""
 
-    def __init__(self, gui: viser.GuiApi, source: ResultsSource, *, on: Callable, tell: Callable) -> None:
-        self.source, self._tell = source, tell
+    def __init__(self, gui: viser.GuiApi, source: ResultsSource, *, on: Callable, tell: Callable,
+                 compare: ComparePanel | None = None) -> None:
+        self.source, self._tell, self._compare_panel = source, tell, compare
         self._file: ResultFile | None = None
+        self._other: ResultFile | None = None
         self._shown: list[EpisodeRow] = []
         self._frames: list[np.ndarray] = []
         self._decisions: list[str] = []
@@ -81,10 +85,15 @@ class ResultsPanel:
             self.actions = gui.add_button_group("Episode actions", ("Open", "Re-run live"))
             self.step = gui.add_slider("Step", min=0, max=1, step=1, initial_value=0, disabled=True)
             self.picture = gui.add_image(np.zeros((8, 8, 3), np.uint8), label="Recorded step")
+            self.main_view = gui.add_checkbox("Recorded step in main view", True,
+                                              hint="draw the recorded step over the live map, large; untick for the map")
+            self.large = gui.add_html("")
             self.decision = gui.add_markdown("")
             gui.add_markdown(RERUN_NOTE)
             self.compare = gui.add_dropdown("Compare with", (NONE,) + self._file_names())
             self.comparison = gui.add_markdown("")
+            self.side_by_side = gui.add_button("Compare side by side", disabled=compare is None,
+                                               hint="the selected episode in both files, step by step (Compare folder)")
         self._wire(on)
         if self.file.value != NONE:
             try:
@@ -95,7 +104,7 @@ class ResultsPanel:
     @property
     def inputs(self) -> tuple:
         return (self.file, self.refresh, self.filter, self.sort, self.descending, self.episode, self.actions,
-                self.step, self.compare)
+                self.step, self.main_view, self.compare, self.side_by_side)
 
     # --- controls ----------------------------------------------------------------------------
     def _wire(self, on: Callable) -> None:
@@ -128,6 +137,20 @@ class ResultsPanel:
         @on(self.compare)
         def _(event) -> None:
             self._compare(self.compare.value)
+
+        @on(self.main_view)
+        def _(event) -> None:
+            self._show_step(int(self.step.value))
+
+        @on(self.side_by_side)
+        def _(event) -> None:
+            row = self._selected()
+            if self._other is None or self._compare_panel is None:
+                raise L3MVNError("pick a second file in Compare with first: the episode opens with each file's line")
+            other = next((r for r in self._other.rows if r.raw["key"] == row.raw["key"]), None)
+            if other is None:
+                raise L3MVNError(f"episode {row.raw['key']} is not in {self._other.path.name}; pick one both files hold")
+            self._compare_panel.open_rows(row, other, self.source.recordings_dir, event.client_id)
 
     def _file_names(self) -> tuple[str, ...]:
         names = tuple(p.name for p in list_result_files(self.source.results_dir))
@@ -199,19 +222,23 @@ class ResultsPanel:
             picture, line = self._frames[k], self._decisions[k]
         self.picture.image = picture
         self.decision.content = line
+        self.large.content = (main_view_html(picture, f"Recorded step: {line}", main_view=True)
+                              if self.main_view.value else "")
 
     def _clear_steps(self, note: str) -> None:
         with self._lock:
             self._frames, self._decisions = [], []
         self.step.disabled = True
         self.picture.image = np.zeros((8, 8, 3), np.uint8)
+        self.large.content = ""
         self.decision.content = note
 
     def _compare(self, name: str) -> None:
         if name == NONE or self._file is None:
             self.comparison.content = ""
+            self._other = None
             return
-        other = load_result_file(self.source.results_dir / name)
+        other = self._other = load_result_file(self.source.results_dir / name)
         only_a, only_b = solved_by_one(self._file.rows, other.rows)
         here = self._file.path.name
         self.comparison.content = (f"Solved by **{here}** only ({len(only_a)}): "

@@ -9,6 +9,7 @@ from typing import Iterable
 
 import viser
 
+from app.compare import EpisodeSource
 from app.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS, OriginPolicy
 from app.results_view import ResultsSource
 from app.session_worker import DashboardController
@@ -85,7 +86,9 @@ def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", po
         source = None if results_dir is None else ResultsSource(
             Path(results_dir), Path(recordings_dir if recordings_dir is not None else record_dir),
             None if dataset is None else str(dataset), split, houses, episodes_per_house, seed)
-        view = DashboardView(server, controller, source)
+        episodes_source = EpisodeSource(None if dataset is None else str(dataset), split, houses, episodes_per_house,
+                                        seed, None if scenes_dir is None else str(scenes_dir))
+        view = DashboardView(server, controller, source, episodes_source)
     except BaseException:
         controller.close()
         server.stop()

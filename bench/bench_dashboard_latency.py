@@ -7,12 +7,17 @@ clocks are this machine's, so the difference is the latency: drawing the map, en
 websocket hop and the page applying the update. (viser's websocket lives in a web worker, out of
 reach of page scripts and of playwright's websocket events, hence this proxy.)
 
-    .venv/bin/python bench/bench_dashboard_latency.py [--steps 40] [--policy frontier]
+    .venv/bin/python bench/bench_dashboard_latency.py [--steps 40] [--policy frontier] [--compare]
+
+``--compare`` first opens the Compare folder in the page and runs a comparison there (the dashboard's
+policy vs cost-utility on the selected episode, episodes capped at ``--compare-max-steps``), so the
+comparison's picture lies over the main view while the live steps are measured.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import socket
 import statistics
 import time
@@ -41,15 +46,30 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _run_comparison(page) -> None:
+    """Open the Compare folder, press Run both and wait for its picture over the main view."""
+    t0 = time.perf_counter()
+    page.get_by_text("Compare", exact=True).first.click()
+    page.get_by_role("button", name="Run both").click()
+    page.get_by_text("decisions ").first.wait_for(timeout=900_000)
+    page.locator(".l3mvn-main-view img").first.wait_for(timeout=60_000)
+    print(f"comparison shown after {time.perf_counter() - t0:.1f} s")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=40)
     ap.add_argument("--policy", default="frontier")
     ap.add_argument("--gap", type=float, default=0.4, help="seconds between steps")
+    ap.add_argument("--compare", action="store_true", help="run a comparison in the page's Compare view first")
+    ap.add_argument("--compare-max-steps", type=int, default=120,
+                    help="with --compare: sim.max_steps of the dashboard (caps the two compared episodes)")
     args = ap.parse_args()
 
-    dash = start_dashboard(port=_free_port(), houses=1, episodes_per_house=1, policy=args.policy,
-                           cfg=Config())
+    cfg = Config()
+    if args.compare:
+        cfg = cfg.replace(sim=dataclasses.replace(cfg.sim, max_steps=args.compare_max_steps))
+    dash = start_dashboard(port=_free_port(), houses=1, episodes_per_house=1, policy=args.policy, cfg=cfg)
     ctl = dash.controller
     stamps: dict[int, float] = {}
     ctl.on_snapshot(lambda s: s.event is not None and stamps.setdefault(s.event.step, s.stepped_at))
@@ -62,6 +82,8 @@ def main() -> None:
             page.wait_for_selector("canvas", timeout=20_000)
             while not dash.server.get_clients():
                 time.sleep(0.05)
+            if args.compare:
+                _run_comparison(page)
             scene = ctl.scene_keys[0]
             ctl.reset(scene, ctl.episodes_of(scene)[0].episode_id)
             ctl.wait_idle()
@@ -79,7 +101,7 @@ def main() -> None:
     if not latencies:
         raise SystemExit("no map updates reached the browser")
     latencies.sort()
-    print(f"policy {args.policy}, {len(latencies)}/{len(stamps)} steps matched: step end -> map in browser "
+    print(f"policy {args.policy}{', compare view open' if args.compare else ''}, {len(latencies)}/{len(stamps)} steps matched: step end -> map in browser "
           f"median {statistics.median(latencies):.1f} ms, p90 {latencies[int(0.9 * (len(latencies) - 1))]:.1f} ms, "
           f"max {latencies[-1]:.1f} ms")
 
