@@ -57,6 +57,7 @@ def agent_map_view(decision: Decision, target: str = "") -> MapView:
         agent_heading=m.agent_heading, long_term_goal=_cell(decision.long_term_goal),
         short_term_goal=_cell(decision.short_term_goal), goal_kind=decision.goal_kind,
         override=decision.override, frontiers=frontiers, legend=tuple(legend(shown)), target=target,
+        fusion=decision.frontiers[0].fusion if decision.frontiers else None,
     )
 
 
@@ -145,6 +146,7 @@ def _marker(f, chosen: bool) -> FrontierMarker:
         distance_m=float(f.distance_m), s_cu=float(f.s_cu),
         s_llm=None if f.s_llm is None else float(f.s_llm), fused=None if f.fused is None else float(f.fused),
         objects=tuple(f.objects), queries=dict(f.queries), reason=f.reason, chosen=chosen,
+        llm_scores=dict(f.llm_scores), expected_m=dict(f.expected_m),
     )
 
 

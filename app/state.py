@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from l3mvn.events import StepEvent
+from l3mvn.frontiers import Fusion
 
 Cell = tuple[int, int]
 
@@ -30,6 +31,8 @@ class FrontierMarker:
     queries: dict[str, str]
     reason: str
     chosen: bool
+    llm_scores: dict[str, float] = field(default_factory=dict)  # p(goal | frontier) for every goal
+    expected_m: dict[str, float] = field(default_factory=dict)  # a distance head's metres to every goal
 
     @property
     def label(self) -> str:
@@ -63,6 +66,7 @@ class MapView:
     legend: tuple[tuple[str, tuple[int, int, int]], ...] = ()  # the categories the image shows
     target: str = ""  # the goal category, ringed on the image
     world_origin: tuple[float, float] = (0.0, 0.0)  # world (x, y) of cell (0, 0)'s centre; +col = +x, +row = +y
+    fusion: Fusion | None = None  # the language rule of the last frontier choice, with its numbers
 
     @property
     def cells(self) -> Cell:

@@ -25,6 +25,8 @@ import numpy as np
 import viser
 
 from app.client_input import ray_refusal, update_refusal
+from app.compare_view import ComparePanel, EpisodeSource
+from app.language_panel import language_html
 from app.map_image import GT_FLOOR, GT_GOAL, GT_REGION, ground_truth_layer, score_color
 from app.results_view import ResultsPanel, ResultsSource
 from app.session_worker import DEFAULT_SCORER, FRAME_WIDTH, MAX_SPEED, MIN_SPEED, DashboardController
@@ -119,7 +121,7 @@ class DashboardView:
     """Builds the page once and keeps it in sync with the controller's snapshots."""
 
     def __init__(self, server: viser.ViserServer, controller: DashboardController,
-                 results: ResultsSource | None = None) -> None:
+                 results: ResultsSource | None = None, compare: EpisodeSource | None = None) -> None:
         self.server, self.ctl = server, controller
         self._latest: Snapshot | None = None
         self._drawn: tuple = (None, None)  # (event, manual goal) the map was last drawn for
@@ -131,9 +133,14 @@ class DashboardView:
         self._busy_notes: dict[int, viser.NotificationHandle] = {}
         self._gt_key: tuple | None = None  # what the ground-truth layer was last built for
         self._build_gui()
-        self.results = None if results is None else ResultsPanel(server.gui, results, on=self._on, tell=self._tell)
+        self.compare = None if compare is None else ComparePanel(
+            server.gui, compare, config=controller.cfg, record_dir=controller.record_dir,
+            current_policy=controller.policy_name, selected_episode=self._selected_episode, on=self._on, tell=self._tell)
+        self.results = None if results is None else ResultsPanel(server.gui, results, on=self._on, tell=self._tell,
+                                                                 compare=self.compare)
         self._build_scene()
-        panel_inputs = () if self.results is None else self.results.inputs
+        panel_inputs = ((() if self.results is None else self.results.inputs)
+                        + (() if self.compare is None else self.compare.inputs))
         self._inputs = {handle_uuid(h): h for h in (*vars(self).values(), *panel_inputs) if isinstance(h, _INPUTS)}
         check_gui_updates(server, self._admit_update)
         ignore_client_messages_except(server, "GuiUpdateMessage", "ScenePointerMessage")  # controls, map clicks
@@ -189,6 +196,8 @@ class DashboardView:
             self.frontier_pick = gui.add_dropdown("Frontier", ("none",), disabled=True)
             self.goal_buttons = gui.add_button_group("Manual goal", ("Go to frontier", "Clear"))
             self.frontier_table = gui.add_markdown(_no_map_markdown(ctl.policy_name, started=False))
+        with gui.add_folder("Language"):
+            self.language = gui.add_html(language_html(None, ctl.policy_name))
         with gui.add_folder("Recordings"):
             self.recordings = gui.add_markdown(_recordings_markdown(ctl.record_dir))
             self.refresh_recordings = gui.add_button("Refresh list")
@@ -489,6 +498,7 @@ class DashboardView:
             self._show_busy(snap.busy)
             if snap.map is None:
                 self.frontier_table.content = _no_map_markdown(self.ctl.policy_name, started=snap.event is not None)
+            self.language.content = language_html(snap.map, snap.policy)  # viser sends it only when it changed
             drawn = (snap.event, snap.manual_goal)
             if drawn == self._drawn:
                 return

@@ -159,5 +159,5 @@ def _with_language(frontiers: list[Frontier], sel: Selection) -> list[Frontier]:
     """The frontiers as the decision shows them: each with its language scores, the chosen one with
     the policy's reason."""
     return [replace(f, queries=ls.queries, llm_scores=ls.llm_scores, s_llm=ls.s_llm, fused=ls.fused,
-                    reason=sel.reason if k == sel.frontier else f.reason)
+                    expected_m=ls.expected_m, fusion=sel.fusion, reason=sel.reason if k == sel.frontier else f.reason)
             for k, (f, ls) in enumerate(zip(frontiers, sel.language))]

@@ -1,6 +1,6 @@
 """Frontier extraction and cost-utility scoring on plain map arrays."""
 
 from l3mvn.frontiers.extract import extract_frontiers
-from l3mvn.frontiers.types import Frontier
+from l3mvn.frontiers.types import Frontier, Fusion
 
-__all__ = ["Frontier", "extract_frontiers"]
+__all__ = ["Frontier", "Fusion", "extract_frontiers"]

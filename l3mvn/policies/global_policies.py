@@ -7,25 +7,27 @@ frontier unless another one scores clearly higher.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import cv2
 import numpy as np
 
-from l3mvn.frontiers import Frontier
+from l3mvn.frontiers import Frontier, Fusion
 from l3mvn.planning.fmm import distance_field
 
 
 @dataclass(frozen=True)
 class LanguageScore:
     """What a language policy concluded about one frontier: the sentence asked per goal, the model's
-    p(goal | frontier) for every goal, the target's S_LLM and the fused score the choice used."""
+    p(goal | frontier) for every goal, the target's S_LLM and the fused score the choice used; with a
+    head that predicts distances, its metres from the frontier to every goal."""
 
     queries: dict[str, str]
     llm_scores: dict[str, float]
     s_llm: float
     fused: float
+    expected_m: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -35,6 +37,7 @@ class Selection:
     scores: np.ndarray  # one per frontier, in [0, 1]
     reason: str
     language: tuple[LanguageScore, ...] = ()  # one per frontier (language policies only)
+    fusion: Fusion | None = None  # the language policy's rule and the numbers it compared
 
 
 class GlobalPolicy(Protocol):

@@ -31,7 +31,7 @@ import numpy as np
 
 from l3mvn.config import SELECTIONS, FrontierConfig, PolicyConfig
 from l3mvn.errors import L3MVNError
-from l3mvn.frontiers import Frontier
+from l3mvn.frontiers import Frontier, Fusion
 from l3mvn.policies.global_policies import LanguageScore, Selection
 
 
@@ -93,35 +93,49 @@ class LanguageFrontierPolicy:
         dists = self.scorer.score(objects)
         s_llm = np.array([d[goal] for d in dists])
         explore = self._exploration(frontiers)
-        metres = None
+        metres = all_metres = None
         if getattr(self.scorer, "predicts_distance", False):
-            metres = self.scorer.expected_distance(objects)[:, self.scorer.goals.index(goal)]
+            all_metres = self.scorer.expected_distance(objects)
+            metres = all_metres[:, self.scorer.goals.index(goal)]
             z = -metres / LISTWISE_TEMPERATURE_M
             s_llm = np.exp(z - z.max()) / np.exp(z - z.max()).sum()
         if self.selection == "expected":
-            i, reason, fused = self._expected(frontiers, metres)
+            i, reason, fused, fusion = self._expected(frontiers, metres, s_llm, explore)
         elif self.selection == "official_code":
-            i, reason = self._official(frontiers, s_llm, explore)
+            i, reason, fusion = self._official(frontiers, s_llm, explore)
             fused = s_llm
         else:
-            i, reason, fused = self._paper(s_llm, explore)
+            i, reason, fused, fusion = self._paper(frontiers, s_llm, explore)
+        expected = ([{} for _ in frontiers] if all_metres is None else
+                    [{g: round(float(m), 3) for g, m in zip(self.scorer.goals, row)} for row in all_metres])
         language = tuple(
             LanguageScore(queries=self.scorer.queries(objs), llm_scores={g: round(p, 4) for g, p in d.items()},
-                          s_llm=float(p), fused=float(v))
-            for objs, d, p, v in zip(objects, dists, s_llm, fused)
+                          s_llm=float(p), fused=float(v), expected_m=e)
+            for objs, d, p, v, e in zip(objects, dists, s_llm, fused, expected)
         )
-        return Selection(i, frontiers[i].center, np.asarray(fused, dtype=np.float64), reason, language)
+        return Selection(i, frontiers[i].center, np.asarray(fused, dtype=np.float64), reason, language, fusion)
 
-    def _expected(self, frontiers: list[Frontier], metres: np.ndarray) -> tuple[int, str, np.ndarray]:
+    def _fusion(self, frontiers: list[Frontier], branch: str, choice: int, s_llm: np.ndarray, explore: np.ndarray,
+                compared: np.ndarray, **numbers) -> Fusion:
+        """The record of what the rule compared (the same arrays it ranked, as plain floats)."""
+        return Fusion(rule=self.selection, branch=branch, choice=choice, ids=tuple(f.id for f in frontiers),
+                      s_llm=tuple(map(float, s_llm)), explore=tuple(map(float, explore)),
+                      compared=tuple(map(float, compared)), exploration=self.exploration, **numbers)
+
+    def _expected(self, frontiers: list[Frontier], metres: np.ndarray, s_llm: np.ndarray,
+                  explore: np.ndarray) -> tuple[int, str, np.ndarray, Fusion]:
         """argmin of C - U / lambda + expected metres on; fused = that total min-max flipped into [0, 1]
         (1 = best), the scale the agent's commitment margin reads."""
-        base = np.array([f.cost - f.utility / self.cu_lambda for f in frontiers], dtype=np.float64)
-        total = base + metres
+        cost = np.array([f.cost for f in frontiers], dtype=np.float64)
+        bonus = np.array([f.utility / self.cu_lambda for f in frontiers], dtype=np.float64)
+        total = (cost - bonus) + metres
         i = int(np.argmin(total))
         span = total.max() - total.min()
         fused = np.ones_like(total) if span <= 0 else 1.0 - (total - total.min()) / span
+        fusion = self._fusion(frontiers, "least total", i, s_llm, explore, total, cost_m=tuple(map(float, cost)),
+                              bonus_m=tuple(map(float, bonus)), expected_m=tuple(map(float, metres)))
         return i, (f"expected: {frontiers[i].cost:.1f} m to frontier - {frontiers[i].utility / self.cu_lambda:.1f} m "
-                   f"size bonus + {metres[i]:.1f} m expected on = {total[i]:.1f} m (least)"), fused
+                   f"size bonus + {metres[i]:.1f} m expected on = {total[i]:.1f} m (least)"), fused, fusion
 
     def _exploration(self, frontiers: list[Frontier]) -> np.ndarray:
         if self.exploration == "cost-utility":
@@ -129,30 +143,41 @@ class LanguageFrontierPolicy:
         d = np.array([f.distance_m for f in frontiers], dtype=np.float64)
         return 1.0 - d / max(d.max(), 1e-9) if len(d) > 1 else np.ones(1)
 
-    def _paper(self, s_llm: np.ndarray, explore: np.ndarray) -> tuple[int, str, np.ndarray]:
+    def _paper(self, frontiers: list[Frontier], s_llm: np.ndarray,
+               explore: np.ndarray) -> tuple[int, str, np.ndarray, Fusion]:
         lo, hi = self.bound
         top = float(s_llm.max())
         if top > hi:
             i = int(np.argmax(s_llm))
-            return i, f"language: S_LLM {top:.2f} > {hi} (bound)", s_llm
+            return (i, f"language: S_LLM {top:.2f} > {hi} (bound)", s_llm,
+                    self._fusion(frontiers, "language", i, s_llm, explore, s_llm, bound=(lo, hi)))
         if top < lo:
             i = int(np.argmax(explore))
-            return i, f"exploration: S_LLM {top:.2f} < {lo} (bound), best {self.exploration}", lo + explore * (hi - lo)
+            fused = lo + explore * (hi - lo)
+            return (i, f"exploration: S_LLM {top:.2f} < {lo} (bound), best {self.exploration}", fused,
+                    self._fusion(frontiers, "exploration", i, s_llm, explore, fused, bound=(lo, hi)))
         fused = np.maximum(s_llm, lo + explore * (hi - lo))
         i = int(np.argmax(fused))
         why = "language" if s_llm[i] >= lo + explore[i] * (hi - lo) else "exploration"
-        return i, f"fused ({why} wins): S_LLM {s_llm[i]:.2f}, {self.exploration} {explore[i]:.2f}", fused
+        return (i, f"fused ({why} wins): S_LLM {s_llm[i]:.2f}, {self.exploration} {explore[i]:.2f}", fused,
+                self._fusion(frontiers, "fused", i, s_llm, explore, fused, bound=(lo, hi)))
 
-    def _official(self, frontiers: list[Frontier], s_llm: np.ndarray, explore: np.ndarray) -> tuple[int, str]:
+    def _official(self, frontiers: list[Frontier], s_llm: np.ndarray,
+                  explore: np.ndarray) -> tuple[int, str, Fusion]:
         u = np.array([f.utility for f in frontiers], dtype=np.float64)
         no_objects = np.array([not self.scorer.query_objects(f.objects) for f in frontiers])
         s = np.where(no_objects, 0.1 + 0.1 * u / max(u.max(), 1e-9), s_llm)
         threshold = 0.2 if self.paradigm == "feedforward" else 0.3
+
+        def chose(branch: str, i: int, reason: str) -> tuple[int, str, Fusion]:
+            return i, reason, self._fusion(frontiers, branch, i, s_llm, explore, s, threshold=threshold)
+
         if s.max() > threshold:
-            return int(np.argmax(s)), f"official code: S_LLM {s.max():.2f} > {threshold}"
+            return chose("language", int(np.argmax(s)), f"official code: S_LLM {s.max():.2f} > {threshold}")
         order = np.argsort(-explore, kind="stable")
         if self.paradigm != "feedforward":
             for i in order:
                 if s[i] > 0.1:
-                    return int(i), f"official code: first by utility with S_LLM {s[i]:.2f} > 0.1"
-        return int(order[0]), "official code: best utility"
+                    return chose("first above 0.1", int(i),
+                                 f"official code: first by utility with S_LLM {s[i]:.2f} > 0.1")
+        return chose("utility", int(order[0]), "official code: best utility")

@@ -22,6 +22,8 @@ HIGH_SCORE_RGB = np.array([40, 190, 80], np.float32)
 LABELLED_FRONTIERS = 3  # only the best frontiers (and the chosen one) carry a label: more would overlap
 MIN_VIEW_M = 6.0  # a fitted map view is never narrower: the first steps map a thin cone
 VIEW_MARGIN = 0.1  # of the mapped extent, on every side
+LANGUAGE_CHOSEN = "metrics/language/chosen"  # the chosen frontier's p(goal), a line per goal
+LANGUAGE_BY_GOAL = "metrics/language/by_goal"  # /<goal>: p(goal) of every frontier, a line per F<id>
 
 
 def score_colors(scores: np.ndarray) -> np.ndarray:
@@ -64,6 +66,7 @@ def default_blueprint(view: MapBounds | None = None) -> rrb.Blueprint:
                 rrb.Tabs(
                     rrb.TimeSeriesView(name="Frontier scores", origin="metrics/frontier_scores"),
                     rrb.TimeSeriesView(name="Chosen frontier", origin="metrics/chosen_frontier"),
+                    rrb.TimeSeriesView(name="Language (chosen)", origin=LANGUAGE_CHOSEN),
                     rrb.TimeSeriesView(name="Ground truth", origin="metrics/ground_truth"),
                     rrb.TimeSeriesView(name="Frontiers", origin="metrics/frontiers"),
                     rrb.TimeSeriesView(name="Timings (ms)", origin="metrics/timings_ms"),

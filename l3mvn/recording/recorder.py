@@ -16,10 +16,11 @@ from l3mvn.errors import L3MVNError, first_line
 from l3mvn.events import EventBus, StepEvent
 from l3mvn.recording.catalogue import APPLICATION_ID, TIMELINE, recording_path
 from l3mvn.recording.layout import (
-    AGENT_RGB, GOAL_RGB, LABELLED_FRONTIERS, TARGET_RGB, MapBounds, default_blueprint, map_view_bounds, score_colors,
+    AGENT_RGB, GOAL_RGB, LABELLED_FRONTIERS, LANGUAGE_BY_GOAL, LANGUAGE_CHOSEN, TARGET_RGB, MapBounds,
+    default_blueprint, map_view_bounds, score_colors,
 )
 from l3mvn.types import Episode
-from l3mvn.viz import BACKGROUND_RGB, category_palette
+from l3mvn.viz import BACKGROUND_RGB, category_color, category_palette
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +75,7 @@ class Recorder:
         self._view: MapBounds | None = None
         self._resolution_m = 0.0
         self._last_target: tuple = ()
+        self._last_fusion = None  # the Fusion record last written to log/fusion
         self.log_ms: list[float] = []  # this recorder's own cost per event, for budgets and benchmarks
 
     @classmethod
@@ -227,15 +229,38 @@ class Recorder:
         chosen = next((f for f in d.frontiers if f.id == d.chosen_frontier), None)
         parts = {} if chosen is None else {"LLM": chosen.s_llm, "CU": chosen.s_cu, "fused": chosen.fused}
         self._log_series("metrics/chosen_frontier", {k: math.nan if v is None else v for k, v in parts.items()})
+        if any(f.llm_scores for f in d.frontiers):
+            self._log_language(d.frontiers, chosen)
 
-    def _log_series(self, entity: str, values: dict[str, float]) -> None:
+    def _log_language(self, frontiers: list, chosen) -> None:
+        """Why the prior preferred a frontier, over time: the chosen frontier's p(goal) per goal (and
+        a distance head's metres to each goal) in the map's category colours, every frontier's p(goal)
+        per goal as lines F<id>, and the fusion rule's line at every new choice."""
+        self._log_series(LANGUAGE_CHOSEN, {} if chosen is None else chosen.llm_scores, colors=category_color)
+        if any(f.expected_m for f in frontiers):
+            self._log_series(f"{LANGUAGE_CHOSEN}_metres", {} if chosen is None else chosen.expected_m,
+                             colors=category_color)
+        by_goal: dict[str, dict[str, float]] = {}
+        for f in frontiers:
+            for goal, p in f.llm_scores.items():
+                by_goal.setdefault(goal, {})[f"F{f.id}"] = p
+        for goal, values in by_goal.items():
+            self._log_series(f"{LANGUAGE_BY_GOAL}/{goal.replace(' ', '_')}", values)
+        fusion = frontiers[0].fusion  # one record per choice, shared by its frontiers
+        if fusion is not None and fusion is not self._last_fusion:
+            self._rec.log("log/fusion", rr.TextLog(fusion.describe()))
+        self._last_fusion = fusion
+
+    def _log_series(self, entity: str, values: dict[str, float], colors=None) -> None:
         """One entity, one named line per key: a key's line index never changes, a missing value is
-        a gap (NaN), and a new key extends the names (one log call per group, not per value)."""
+        a gap (NaN), and a new key extends the names (one log call per group, not per value);
+        ``colors(key)`` gives a line its colour (categories keep their map colour)."""
         keys = self._series.setdefault(entity, [])
         grown = [k for k in values if k not in keys]
         if grown:
             keys.extend(grown)
-            self._rec.log(entity, rr.SeriesLines(names=keys), static=True)
+            self._rec.log(entity, rr.SeriesLines(names=keys, colors=None if colors is None else
+                                                 [colors(k) for k in keys]), static=True)
         if keys:
             row = [float(values.get(k, math.nan)) for k in keys]
             self._rec.log(entity, rr.Scalars([v if math.isfinite(v) else math.nan for v in row]))

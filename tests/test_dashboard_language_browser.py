@@ -1,0 +1,93 @@
+"""The Language folder in a real browser: an l3mvn-zs episode on a procedural house shows per-goal
+bars and the fusion rule line with the numbers of the snapshot; a policy without language says so.
+
+Skips like tests/test_dashboard_browser.py when playwright or a chromium is missing. Set
+L3MVN_SCREENSHOTS=DIR to keep the screenshot (docs/screenshots/dashboard_language_panel.png).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+sync_api = pytest.importorskip("playwright.sync_api")
+
+from conftest import free_port
+from test_dashboard_browser import (  # noqa: E402  (after the skip: it needs playwright too)
+    CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_text, _step_shown, _wait,
+)
+
+pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
+                                                         "`playwright install chromium` runs these tests")
+
+from app.language_panel import BAR_PX, SHOWN_FRONTIERS  # noqa: E402
+from app.server import start_dashboard  # noqa: E402
+from l3mvn.config import Config  # noqa: E402
+
+MAX_CLICKS = 40  # the look-around takes 12 steps; episode 0 of house 0 (toilet) chooses at step 13
+
+
+@pytest.fixture(scope="module")
+def dash():
+    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="l3mvn-zs",
+                        cfg=Config().with_frame(240, 320))
+    yield d
+    d.stop()
+
+
+def test_the_language_folder_shows_bars_and_the_fusion_rule_of_the_choice(dash, tmp_path):
+    shots = Path(os.environ.get("L3MVN_SCREENSHOTS", tmp_path))
+    ctl = dash.controller
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport=VIEWPORT)
+            page.set_default_timeout(60_000)
+            page.goto(dash.url)
+            page.wait_for_selector("canvas", timeout=20_000)
+            _wait(lambda: "scores frontiers with a language model" in _panel_text(page), timeout=20,
+                  what="the Language folder's note before the first choice")
+
+            page.get_by_role("button", name="Reset").click()
+            _wait(lambda: _step_shown(page) == 0, timeout=60, what="step 0 (the language model loads once)")
+            for _ in range(MAX_CLICKS):
+                view = ctl.snapshot.map
+                if view is not None and view.fusion is not None:
+                    break
+                n = _step_shown(page)
+                page.get_by_role("button", name="Step").click()
+                _wait(lambda: (_step_shown(page) or 0) > n, timeout=30, what="the next step")
+            view = ctl.snapshot.map
+            assert view is not None and view.fusion is not None, "the agent never chose a frontier"
+            line = view.fusion.describe()
+            assert line.startswith("bound B = [0.15, 0.30]; max S_LLM")
+            _wait(lambda: line in _panel_text(page), what="the fusion rule line with the snapshot's numbers")
+
+            panel = page.get_by_text("Fusion rule").first
+            panel.scroll_into_view_if_needed()
+            text = _panel_text(page)
+            chosen = next(f for f in view.frontiers if f.chosen)
+            assert f"★ F{chosen.id} (chosen)" in text and f"{view.target} (target)" in text
+            query = chosen.queries.get(view.target)
+            assert query is None or query in text
+            # The target's bar ringed on every shown card; the chosen card first, its bar as long as its p.
+            bars = page.locator(f'span[data-goal="{view.target}"]')
+            assert bars.count() == min(len(view.frontiers), SHOWN_FRONTIERS)
+            assert "solid" in bars.first.evaluate("e => getComputedStyle(e).outlineStyle")
+            width = bars.first.evaluate("e => e.getBoundingClientRect().width")
+            assert width == pytest.approx(BAR_PX * chosen.llm_scores[view.target], abs=1.0)
+            assert page.locator("span[data-goal]").count() == 6 * bars.count()  # every goal on every card
+            for folder in ("Camera", "Frontiers"):  # folded, so the screenshot shows the Language folder whole
+                page.get_by_text(folder, exact=True).first.click()
+            page.get_by_text("Language", exact=True).first.evaluate("e => e.scrollIntoView({block: 'start'})")
+            page.wait_for_timeout(500)
+            page.screenshot(path=str(shots / "dashboard_language_panel.png"))
+
+            ctl.set_policy("cost-utility")
+            page.get_by_role("button", name="Reset").click()
+            _wait(lambda: "cost-utility uses no language" in _panel_text(page), timeout=30,
+                  what="the note of a policy without language")
+        finally:
+            browser.close()

@@ -1,0 +1,100 @@
+"""Recordings of a language policy: per-goal scores over time and the fusion line, read back with
+rerun's own reader and checked against the decisions the recorder was sent."""
+
+import dataclasses
+import math
+
+import pytest
+import rerun as rr
+from rerun.chunk import RrdReader
+
+from l3mvn.config import AgentConfig, Config, SimConfig
+from l3mvn.events import EventBus
+from l3mvn.language import GOALS
+from l3mvn.recording import Recorder
+from l3mvn.recording.layout import LANGUAGE_BY_GOAL, LANGUAGE_CHOSEN
+from l3mvn.runner import Runner
+from l3mvn.types import Episode, Pose
+
+CONFIG = Config(sim=dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=40),
+                agent=AgentConfig(look_around_steps=2))
+
+
+@pytest.fixture(autouse=True)
+def strict_rerun():
+    before = rr.strict_mode()
+    rr.set_strict_mode(True)
+    yield
+    rr.set_strict_mode(before)
+
+
+def _by_step(path, entity, column) -> dict[int, list]:
+    out = {}
+    for chunk in RrdReader(path).stream():
+        batch = chunk.to_record_batch()
+        if chunk.entity_path == entity and column in batch.schema.names and "step" in batch.schema.names:
+            for step, value in zip(batch.column("step").to_pylist(), batch.column(column).to_pylist()):
+                if value is not None:
+                    out[step] = value
+    return out
+
+
+def _static(path, entity, column) -> list:
+    return [v for chunk in RrdReader(path).stream() if chunk.entity_path == entity
+            for v in (chunk.to_record_batch().column(column).to_pylist()
+                      if column in chunk.to_record_batch().schema.names else []) if v is not None]
+
+
+def _record(tiny_scene, tmp_path, policy: str, config: Config = CONFIG):
+    episode = Episode(episode_id=0, scene="Tiny", floor=0, start=Pose(2.5, 2.0, 0.0), goal="toilet")
+    bus, events = EventBus(), []
+    bus.subscribe(events.append)
+    recorder = Recorder.for_episode(tmp_path, "tiny", episode, policy).attach(bus)
+    Runner(config).run(tiny_scene, episode, policy, bus)
+    assert recorder.errors == 0
+    return recorder.path, events
+
+
+def test_the_chosen_frontiers_per_goal_scores_and_the_fusion_line_are_recorded_per_step(tiny_scene, tmp_path):
+    path, events = _record(tiny_scene, tmp_path, "l3mvn-zs")
+    chosen = {ev.step: ev.decision.frontiers[ev.decision.chosen_frontier] for ev in events
+              if ev.decision is not None and ev.decision.chosen_frontier is not None and ev.decision.frontiers}
+    assert chosen, "the agent never chose a frontier"
+
+    assert _static(path, f"/{LANGUAGE_CHOSEN}", "SeriesLines:names")[-1] == list(GOALS)
+    rows = _by_step(path, f"/{LANGUAGE_CHOSEN}", "Scalars:scalars")
+    for step, frontier in chosen.items():
+        assert rows[step] == pytest.approx([frontier.llm_scores[g] for g in GOALS])
+    gaps = [step for step, row in rows.items() if step not in chosen]  # a goal that is not a frontier: a gap
+    assert all(all(math.isnan(v) for v in rows[s]) for s in gaps)
+
+    toilet = _by_step(path, f"/{LANGUAGE_BY_GOAL}/toilet", "Scalars:scalars")
+    names = _static(path, f"/{LANGUAGE_BY_GOAL}/toilet", "SeriesLines:names")[-1]
+    step, frontier = next(iter(chosen.items()))
+    assert toilet[step][names.index(f"F{frontier.id}")] == pytest.approx(frontier.llm_scores["toilet"])
+    assert f"/{LANGUAGE_BY_GOAL}/potted_plant" in {c.entity_path for c in RrdReader(path).stream()}
+
+    lines = {step: text for step, (text,) in _by_step(path, "/log/fusion", "TextLog:text").items()}
+    first = min(chosen)
+    assert lines[first] == events[first].decision.frontiers[0].fusion.describe()
+    assert lines[first].startswith("bound B = [0.15, 0.30]; max S_LLM")
+    assert not _static(path, f"/{LANGUAGE_CHOSEN}_metres", "SeriesLines:names")  # the room scorer gives no metres
+
+
+def test_a_distance_head_records_the_chosen_frontiers_expected_metres_to_each_goal(tiny_scene, tmp_path):
+    config = CONFIG.replace(policy=dataclasses.replace(CONFIG.policy, head="frontiers", selection="expected"))
+    path, events = _record(tiny_scene, tmp_path, "l3mvn-ff", config)
+    chosen = {ev.step: ev.decision.frontiers[ev.decision.chosen_frontier] for ev in events
+              if ev.decision is not None and ev.decision.chosen_frontier is not None and ev.decision.frontiers}
+    assert chosen
+    assert _static(path, f"/{LANGUAGE_CHOSEN}_metres", "SeriesLines:names")[-1] == list(GOALS)
+    rows = _by_step(path, f"/{LANGUAGE_CHOSEN}_metres", "Scalars:scalars")
+    for step, frontier in chosen.items():
+        assert rows[step] == pytest.approx([frontier.expected_m[g] for g in GOALS])
+    assert _by_step(path, "/log/fusion", "TextLog:text")[min(chosen)][0].startswith("expected: least metres")
+
+
+def test_a_policy_without_language_records_no_language_series(tiny_scene, tmp_path):
+    path, _ = _record(tiny_scene, tmp_path, "cost-utility")
+    entities = {c.entity_path for c in RrdReader(path).stream()}
+    assert not any(e.startswith("/metrics/language") or e == "/log/fusion" for e in entities)
