@@ -21,6 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from app.map_image import png_bytes, png_rgb
 from l3mvn.config import Config
 from l3mvn.errors import L3MVNError, first_line
 from l3mvn.eval.job import EvalJob
@@ -113,8 +114,7 @@ class Side:
         return max(bisect.bisect_right([d.step for d in self.decisions], step) - 1, 0)
 
     def picture(self, step: int) -> np.ndarray:
-        png = self.pictures[self.index_at(step)]
-        return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
+        return png_rgb(self.pictures[self.index_at(step)])
 
     def decision_line(self, step: int) -> str:
         if step > self.last_step:
@@ -283,7 +283,7 @@ def _side(letter: str, ep: RecordedEpisode) -> Side:
     label = f"{letter}: {ep.policy}"
     pictures = []
     for frame, d in zip(frames(ep, options, title_frames=0), decisions):
-        pictures.append(_encode(_restack(frame, camera_w, d, ep.steps[-1].step)))
+        pictures.append(png_bytes(_restack(frame, camera_w, d, ep.steps[-1].step)))
     return Side(label, ep.path, tuple(pictures), decisions, _success(ep), _result_line(ep))
 
 
@@ -347,11 +347,6 @@ def _num(v) -> str:
     except (TypeError, ValueError):
         return "-"
     return f"{f:.2f}" if math.isfinite(f) else "-"
-
-
-def _encode(rgb: np.ndarray) -> bytes:
-    """PNG (lossless: the page gets exactly these pixels; a 500-step side in memory is tens of MB)."""
-    return cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]), (cv2.IMWRITE_PNG_COMPRESSION, 1))[1].tobytes()
 
 
 def _wrap(text: str, width: int, scale: float) -> list[str]:

@@ -18,7 +18,6 @@ from collections.abc import Callable
 from html import escape
 from pathlib import Path
 
-import cv2
 import numpy as np
 import viser
 
@@ -32,6 +31,7 @@ from app.compare import (
     run_comparison,
     side_folder,
 )
+from app.map_image import png_bytes
 from app.results import EpisodeRow, recording_of, rerun
 from l3mvn.config import Config
 from l3mvn.errors import L3MVNError, first_line
@@ -49,8 +49,7 @@ _ORDER = itertools.count(1)  # overlays opened later lie on top of earlier ones
 def main_view_html(rgb: np.ndarray, title: str, *, main_view: bool) -> str:
     """``rgb`` as a PNG in the page (lossless: the page receives exactly these pixels): over the main
     view (left of the control panel, scaled to fill it, under a title bar), or in the panel at its width."""
-    png = cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]), (cv2.IMWRITE_PNG_COMPRESSION, 1))[1]
-    src = "data:image/png;base64," + base64.b64encode(png.tobytes()).decode("ascii")
+    src = "data:image/png;base64," + base64.b64encode(png_bytes(rgb)).decode("ascii")
     img = f"<img class='l3mvn-picture' alt='{escape(title)}' src='{src}' style='max-width:100%;max-height:100%;"
     if not main_view:
         return f"<div>{img}display:block'></div>"

@@ -126,6 +126,17 @@ def ground_truth_layer(view: MapView, scene: SceneMap, success_region: np.ndarra
     return GroundTruthLayer(_upscale(img, view.scale), (r0, c0), (len(rows), len(cols)), goal_cell)
 
 
+def png_bytes(rgb: np.ndarray) -> bytes:
+    """Lossless PNG of an RGB picture (the page receives exactly these pixels); fast compression, as
+    pictures are made per step."""
+    return cv2.imencode(".png", np.ascontiguousarray(rgb[..., ::-1]), (cv2.IMWRITE_PNG_COMPRESSION, 1))[1].tobytes()
+
+
+def png_rgb(png: bytes) -> np.ndarray:
+    """The RGB picture back from ``png_bytes``."""
+    return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
+
+
 def score_color(score: float | None) -> tuple[int, int, int]:
     """Low score dark purple -> high score yellow (viridis anchors); unscored grey."""
     if score is None or not math.isfinite(score):

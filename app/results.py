@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from app.map_image import png_bytes
 from l3mvn.config import Config
 from l3mvn.errors import L3MVNError, first_line
 from l3mvn.eval.job import EvalJob
@@ -155,11 +156,12 @@ def recording_of(recordings_dir: str | Path, row: EpisodeRow) -> Path | None:
     return find_recording(recordings_dir, row.scene, row.episode_id, row.policy)
 
 
-def recording_frames(path: str | Path) -> tuple[list[np.ndarray], list[str]]:
+def recording_frames(path: str | Path) -> tuple[list[bytes], list[str]]:
     """One picture per recorded step (camera, map with frontiers and scores, the decision under them)
-    and that step's decision line; one-line L3MVNError when the file is not a readable recording."""
+    as a PNG (``png_rgb`` reads it: raw, a 500-step episode's pictures would take ~0.5 GB) and that
+    step's decision line; one-line L3MVNError when the file is not a readable recording."""
     ep = read_episode(path)
-    pictures = list(frames(ep, VideoOptions(height=FRAME_HEIGHT, title_s=0.0), title_frames=0))
+    pictures = [png_bytes(p) for p in frames(ep, VideoOptions(height=FRAME_HEIGHT, title_s=0.0), title_frames=0)]
     return pictures, [f"step {s.step}: {s.decision or '(no decision logged)'}" for s in ep.steps]
 
 

@@ -20,6 +20,7 @@ import numpy as np
 import viser
 
 from app.compare_view import ComparePanel, main_view_html
+from app.map_image import png_rgb
 from app.results import (
     ALL,
     SORT_KEYS,
@@ -68,7 +69,7 @@ class ResultsPanel:
         self._file: ResultFile | None = None
         self._other: ResultFile | None = None
         self._shown: list[EpisodeRow] = []
-        self._frames: list[np.ndarray] = []
+        self._frames: list[bytes] = []  # PNG per step
         self._decisions: list[str] = []
         self._lock = threading.Lock()
         with gui.add_folder("Results", expand_by_default=True):
@@ -219,7 +220,8 @@ class ResultsPanel:
             if not self._frames:
                 return
             k = min(max(k, 0), len(self._frames) - 1)
-            picture, line = self._frames[k], self._decisions[k]
+            png, line = self._frames[k], self._decisions[k]
+        picture = png_rgb(png)
         self.picture.image = picture
         self.decision.content = line
         self.large.content = (main_view_html(picture, f"Recorded step: {line}", main_view=True)

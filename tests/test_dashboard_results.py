@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from conftest import free_port
+from app.map_image import png_rgb
 from app.results import (
     FAILURES,
     filter_choices,
@@ -94,7 +95,7 @@ def test_a_recording_reads_back_one_picture_per_step(evaluated):
     assert path is not None
     pictures, decisions = recording_frames(path)
     assert len(pictures) == len(decisions) == row.steps + 1  # the reset, then one per action
-    assert decisions[3].startswith("step 3: ") and pictures[0].ndim == 3
+    assert decisions[3].startswith("step 3: ") and png_rgb(pictures[0]).ndim == 3
 
 
 def test_rerun_with_the_stored_config_and_seed_gives_the_stored_result(evaluated, tmp_path):
