@@ -50,6 +50,9 @@ CANDIDATES = [
     ("l3mvn-ff rooms head", "l3mvn-ff", PolicyConfig(head="rooms")),
     ("l3mvn-ff frontiers head", "l3mvn-ff", PolicyConfig(head="frontiers")),
     ("l3mvn-ff frontiers expected", "l3mvn-ff", PolicyConfig(head="frontiers", selection="expected")),
+    ("l3mvn-ff rooms-bag head", "l3mvn-ff", PolicyConfig(head="rooms-bag")),  # the ablations without the LM
+    ("l3mvn-ff frontiers-bag head", "l3mvn-ff", PolicyConfig(head="frontiers-bag")),
+    ("l3mvn-ff frontiers-bag expected", "l3mvn-ff", PolicyConfig(head="frontiers-bag", selection="expected")),
     ("l3mvn-zs", "l3mvn-zs", PolicyConfig()),
     ("l3mvn-zs embedding", "l3mvn-zs", PolicyConfig(scorer="embedding")),
     ("near+llm", "near+llm", PolicyConfig()),

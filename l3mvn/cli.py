@@ -134,10 +134,11 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     ev.add_argument("--scorer", default=None, help="language policies: scorer instead of the policy's default")
     ev.add_argument("--selection", choices=SELECTIONS, default="paper",
                     help="language policies: the paper's bound rule, the official code's thresholds, or expected "
-                         "(least cost-utility metres + the frontier head's expected metres; needs --head frontiers)")
+                         "(least cost-utility metres + the frontier head's expected metres; needs --head "
+                         "frontiers or frontiers-bag)")
     ev.add_argument("--head", choices=HEAD_KINDS, default=None,
-                    help=f"feed-forward scorer: head trained on frontiers of house maps or on room lists "
-                         f"(default {DEFAULT_HEAD})")
+                    help=f"feed-forward scorer: head trained on frontiers of house maps or on room lists; "
+                         f"-bag: the same on a bag of objects, without the language model (default {DEFAULT_HEAD})")
     ev.add_argument("--seg-noise", type=float, default=0.0, metavar="P",
                     help="perception errors: per frame and category, miss / mislabel with probability P")
     ev.add_argument("--sim", choices=BACKENDS, default=None,
@@ -195,7 +196,8 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     add_frontier_data_arguments(fd)
     th = sub.add_parser("train-head", help="train the feed-forward language head (split by house or building)")
     th.add_argument("--head", choices=HEAD_KINDS, default="frontiers",
-                    help="frontiers: on --data from `language frontier-data`; rooms: the paper's room lists")
+                    help="frontiers: on --data from `language frontier-data`; rooms: the paper's room lists; "
+                         "-bag: the same on a bag of objects, without the language model")
     th.add_argument("--data", nargs="+", default=None, help="--head frontiers: frontier-data file(s)")
     th.add_argument("--model", default="minilm", help="sentence embedder: minilm (shipped) or a HF name/path")
     th.add_argument("--out", default=None, help="where to save the head (default: the shipped file for minilm)")

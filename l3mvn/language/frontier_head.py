@@ -22,6 +22,10 @@ A frontier with no path to the goal counts as the farthest reachable one (as the
 Split by house (``house_split``: a hash of the name, so a house's side never depends on which others
 are in the file); the checkpoint is the epoch with the lowest mean regret per choice on the
 validation houses, the regret bench's measure; the test houses are never read.
+
+``bag=True`` (``--head frontiers-bag``) is the ablation without the language model: the same lists,
+loss and checkpoint rule, but each frontier's input is the multi-hot vector of its window's objects
+over every category the training and validation frontiers hold, instead of its sentence's embedding.
 """
 
 from __future__ import annotations
@@ -39,7 +43,14 @@ from torch import nn
 from l3mvn.config import FrontierConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.language.frontier_file import Choice, frontier_query, load_choices
-from l3mvn.language.head import SHIPPED_HEADS, GoalHead, save_head
+from l3mvn.language.head import (
+    BAG,
+    BAG_FEATURES,
+    SHIPPED_HEADS,
+    GoalHead,
+    bag_features,
+    save_head,
+)
 from l3mvn.language.models import MINILM, load_sentence_encoder
 from l3mvn.language.vocabulary import GOALS
 
@@ -166,15 +177,17 @@ def train_frontier_head(
     cu_lambda: float = FrontierConfig.cu_lambda,
     seed: int = 0,
     command: str = "",
+    bag: bool = False,
 ) -> dict:
     """Train on the frontier files ``data``, keep the best-validation epoch, save to ``out`` (default:
-    the shipped frontier head for ``model``) and return the metrics written into its meta."""
+    the shipped frontier head for ``model``, or for ``bag``) and return the metrics written into its
+    meta. ``bag``: the input is the bag of window objects and ``model`` is not read."""
     if epochs < 1 or batch_size < 2 or not tau > 0 or calibration < 0 or not cu_lambda > 0:
         raise L3MVNError(f"need epochs >= 1, batch_size >= 2, tau > 0, calibration >= 0, cu_lambda > 0; got "
                          f"{epochs}, {batch_size}, {tau}, {calibration}, {cu_lambda}")
     if not data:
         raise L3MVNError("no frontier data: pass --data FILE (made by `l3mvn language frontier-data`)")
-    key = f"{model.lower()}-{FRONTIER_HEAD_KIND}"
+    key = FRONTIER_HEAD_KIND + BAG if bag else f"{model.lower()}-{FRONTIER_HEAD_KIND}"
     if out is None:
         if key not in SHIPPED_HEADS:
             raise L3MVNError(f"pass --out for embedder {model!r} (only minilm has a shipped path)")
@@ -183,13 +196,13 @@ def train_frontier_head(
     torch.set_num_threads(1)  # tiny matrices: a second thread only waits for a shared CPU
     try:
         return _train(data, model, out, epochs, lr, weight_decay, batch_size, tau, calibration, cu_lambda, seed,
-                      command)
+                      command, bag)
     finally:
         torch.set_num_threads(threads)
 
 
 def _train(data, model, out, epochs, lr, weight_decay, batch_size, tau, calibration, cu_lambda, seed,
-           command) -> dict:
+           command, bag) -> dict:
     torch.manual_seed(seed)
     random.seed(seed)
     np.random.seed(seed)
@@ -198,14 +211,19 @@ def _train(data, model, out, epochs, lr, weight_decay, batch_size, tau, calibrat
     houses = {s: sorted({c.house for c in by_split[s]}) for s in HOUSE_SPLITS}
     if not by_split["train"] or not by_split["val"]:
         raise L3MVNError(f"need choices on train and validation houses; got houses {houses}")
-    texts = sorted({frontier_query(f.objects) for c in choices if house_split(c.house) != "test" for f in c.frontiers})
+    objects = {frontier_query(f.objects): f.objects for c in choices if house_split(c.house) != "test"
+               for f in c.frontiers}
+    texts = sorted(objects)
     sentences = {t: i for i, t in enumerate(texts)}
-    encoder = load_sentence_encoder(model)
-    table = torch.from_numpy(np.asarray(encoder.encode(texts), dtype=np.float32))
+    vocabulary = sorted({o for objs in objects.values() for o in objs})
+    if bag:
+        table = torch.from_numpy(bag_features([objects[t] for t in texts], vocabulary))
+    else:
+        table = torch.from_numpy(np.asarray(load_sentence_encoder(model).encode(texts), dtype=np.float32))
     train = ranking_lists(by_split["train"], sentences, cu_lambda)
     val = ranking_lists(by_split["val"], sentences, cu_lambda)
 
-    head = GoalHead(encoder.dim, len(GOALS))
+    head = GoalHead(table.shape[1], len(GOALS))
     with torch.no_grad():  # start at the mean distance per goal: the listwise term then only ranks
         mean = [float(train.dist[train.mask & (train.goal[:, None] == g)].mean()) if (train.goal == g).any() else 0.0
                 for g in range(len(GOALS))]
@@ -238,6 +256,11 @@ def _train(data, model, out, epochs, lr, weight_decay, batch_size, tau, calibrat
         "command": command or f"l3mvn train-head --data {' '.join(map(str, data))}", "metrics": metrics,
         "settings": settings,
     }
+    if bag:
+        del meta["encoder"]
+        meta |= {"kind": FRONTIER_HEAD_KIND + BAG, "features": BAG_FEATURES, "vocabulary": vocabulary,
+                 "command": command or f"l3mvn train-head --head {FRONTIER_HEAD_KIND + BAG} --data "
+                                       f"{' '.join(map(str, data))}"}
     save_head(head, meta, out)
     return {**metrics, "houses": houses, "path": str(out)}
 

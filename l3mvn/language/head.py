@@ -1,6 +1,11 @@
 """The feed-forward head: sentence embedding -> 3-layer MLP -> one number per goal (logits of p(goal)
 for the room-list head, expected metres to the goal for the frontier head; ``meta["kind"]`` says which).
 
+The bag-of-objects heads (kinds ``rooms-bag``, ``frontiers-bag``) are the ablation without the
+language model: the same MLP, training data and recipe, but the input is the multi-hot vector of the
+frontier's objects over the head's own vocabulary (``meta["vocabulary"]``, ``bag_features``), so no
+sentence is written or embedded. What they lose against the sentence heads is what MiniLM adds.
+
 Layout of the paper's code (1024-512-256-6 for RoBERTa-large; 384-512-256-6 for MiniLM), BatchNorm
 and ReLU after each hidden layer. Saved as one torch file: ``{"state_dict", "meta"}``, where
 ``meta`` names the encoder, goals, sizes, training settings and metrics (see MODEL_CARD.md).
@@ -8,8 +13,10 @@ and ReLU after each hidden layer. Saved as one torch file: ``{"state_dict", "met
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -17,9 +24,36 @@ from l3mvn.errors import L3MVNError
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data" / "language"
 # "<embedder>" is the room-list head (the paper's recipe), "<embedder>-frontiers" the one trained on
-# frontiers of house maps (``frontier_head``).
-SHIPPED_HEADS = {"minilm": DATA_DIR / "head_minilm.pt", "minilm-frontiers": DATA_DIR / "head_minilm_frontiers.pt"}
+# frontiers of house maps (``frontier_head``); "<kind>-bag" the same heads on bags of objects (no embedder).
+SHIPPED_HEADS = {
+    "minilm": DATA_DIR / "head_minilm.pt",
+    "minilm-frontiers": DATA_DIR / "head_minilm_frontiers.pt",
+    "rooms-bag": DATA_DIR / "head_rooms_bag.pt",
+    "frontiers-bag": DATA_DIR / "head_frontiers_bag.pt",
+}
 HIDDEN = (512, 256)
+BAG = "-bag"  # suffix of a head kind whose input is a bag of objects instead of a sentence embedding
+BAG_FEATURES = "bag"  # meta["features"] of such a head (a sentence head has no "features" entry)
+
+
+def is_bag(kind: str) -> bool:
+    return kind.endswith(BAG)
+
+
+def base_kind(kind: str) -> str:
+    """``"rooms"`` or ``"frontiers"``: what the head was trained to predict, whatever its input."""
+    return kind[: -len(BAG)] if is_bag(kind) else kind
+
+
+def bag_features(object_sets: Sequence[Iterable[str]], vocabulary: Sequence[str]) -> np.ndarray:
+    """(sets, len(vocabulary)) float32 multi-hot: 1 where the set holds that (canonical) object. An
+    object outside the vocabulary adds nothing, as an uninformative object adds no word to a room
+    head's sentence; an empty set is the zero vector."""
+    column = {o: i for i, o in enumerate(vocabulary)}
+    out = np.zeros((len(object_sets), len(vocabulary)), dtype=np.float32)
+    for row, objects in enumerate(object_sets):
+        out[row, [column[o] for o in set(objects) if o in column]] = 1.0
+    return out
 
 
 class GoalHead(nn.Module):
@@ -61,4 +95,15 @@ def load_head(path: str | Path) -> tuple[GoalHead, dict]:
     return head.eval(), meta
 
 
-__all__ = ["GoalHead", "HIDDEN", "SHIPPED_HEADS", "save_head", "load_head"]
+__all__ = [
+    "BAG",
+    "BAG_FEATURES",
+    "HIDDEN",
+    "SHIPPED_HEADS",
+    "GoalHead",
+    "bag_features",
+    "base_kind",
+    "is_bag",
+    "load_head",
+    "save_head",
+]

@@ -10,6 +10,10 @@ object give no sample (the scorer answers uniform for them).
 
 Split by building (``rooms.split_of``): train on ``train``, choose the epoch with the lowest
 validation loss on ``val``; ``test`` buildings stay unseen for the ranking benchmark.
+
+``--head rooms-bag`` is the ablation without the language model: the same samples, split, loss,
+epochs and checkpoint rule, but each sample is the multi-hot vector of its objects over the
+informative list (the only objects the sentence could name) instead of the sentence's embedding.
 """
 
 from __future__ import annotations
@@ -25,13 +29,23 @@ from torch import nn
 
 from l3mvn.errors import L3MVNError
 from l3mvn.language.cooccurrence import CooccurrenceStats, load_stats
-from l3mvn.language.head import SHIPPED_HEADS, GoalHead, save_head
+from l3mvn.language.head import (
+    BAG,
+    BAG_FEATURES,
+    SHIPPED_HEADS,
+    GoalHead,
+    bag_features,
+    base_kind,
+    is_bag,
+    save_head,
+)
 from l3mvn.language.models import MINILM, load_sentence_encoder
 from l3mvn.language.queries import feedforward_query
 from l3mvn.language.rooms import Room, load_rooms, rooms_in
 from l3mvn.language.vocabulary import GOALS
 
 TRAIN_COMMAND = "l3mvn train-head"
+ROOMS_BAG = "rooms" + BAG
 
 
 @dataclass(frozen=True)
@@ -66,15 +80,18 @@ def train_head(
     batch_size: int = 256,
     max_objects: int = 3,
     seed: int = 0,
+    bag: bool = False,
 ) -> dict:
     """Train, keep the best-validation epoch, save to ``out`` (default: the shipped head for
-    ``model``) and return the metrics written into the file's meta."""
+    ``model``, or for ``bag``) and return the metrics written into the file's meta. ``bag``: the
+    input is the bag of objects over the informative list and ``model`` is not read."""
     if epochs < 1 or batch_size < 2 or max_objects < 1:
         raise L3MVNError(f"need epochs >= 1, batch_size >= 2, max_objects >= 1; got {epochs}, {batch_size}, {max_objects}")
+    key = ROOMS_BAG if bag else model.lower()
     if out is None:
-        if model.lower() not in SHIPPED_HEADS:
-            raise L3MVNError(f"pass --out for embedder {model!r} (only {', '.join(SHIPPED_HEADS)} has a shipped path)")
-        out = SHIPPED_HEADS[model.lower()]
+        if key not in SHIPPED_HEADS:
+            raise L3MVNError(f"pass --out for embedder {model!r} (only minilm has a shipped path)")
+        out = SHIPPED_HEADS[key]
     torch.manual_seed(seed)
     random.seed(seed)
     np.random.seed(seed)
@@ -84,11 +101,17 @@ def train_head(
     val = room_samples(rooms_in(rooms, "val"), stats, max_objects)
     if not train or not val:
         raise L3MVNError(f"too little data: {len(train)} train and {len(val)} validation samples")
-    encoder = load_sentence_encoder(model)
-    xt, yt, wt = _tensors(train, encoder)
-    xv, yv, wv = _tensors(val, encoder)
+    encoder = None if bag else load_sentence_encoder(model)
 
-    head = GoalHead(encoder.dim, len(GOALS))
+    def featurise(sets: list[tuple[str, ...]]) -> np.ndarray:
+        if encoder is None:
+            return bag_features(sets, stats.informative)
+        return _embed(encoder, [feedforward_query(o) for o in sets])
+
+    xt, yt, wt = _tensors(train, featurise)
+    xv, yv, wv = _tensors(val, featurise)
+
+    head = GoalHead(xt.shape[1], len(GOALS))
     opt = torch.optim.Adam(head.parameters(), lr=lr, weight_decay=weight_decay)
     loss_fn = nn.CrossEntropyLoss(reduction="none")
     best = (float("inf"), -1, None)
@@ -117,23 +140,34 @@ def train_head(
         "train_samples": len(train), "val_samples": len(val),
         "train_rooms": len(rooms_in(rooms, "train")), "val_rooms": len(rooms_in(rooms, "val")),
     }
-    meta = {
-        "encoder": model, "goals": list(GOALS), "informative": list(stats.informative),
-        "command": f"{TRAIN_COMMAND} --model {model}", "metrics": metrics,
-        "settings": {"epochs": epochs, "lr": lr, "weight_decay": weight_decay, "batch_size": batch_size,
-                     "max_objects": max_objects, "seed": seed},
-    }
+    settings = {"epochs": epochs, "lr": lr, "weight_decay": weight_decay, "batch_size": batch_size,
+                "max_objects": max_objects, "seed": seed}
+    meta = {"goals": list(GOALS), "informative": list(stats.informative), "metrics": metrics, "settings": settings}
+    if bag:
+        meta |= {"kind": ROOMS_BAG, "features": BAG_FEATURES, "vocabulary": list(stats.informative),
+                 "command": f"{TRAIN_COMMAND} --head {ROOMS_BAG} --seed {seed}"}
+    else:
+        meta |= {"encoder": model, "command": f"{TRAIN_COMMAND} --model {model}"}
     save_head(head, meta, out)
     return {**metrics, "path": str(out)}
 
 
-def _tensors(samples: list[Sample], encoder) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    texts = sorted({feedforward_query(s.objects) for s in samples})
-    emb = dict(zip(texts, encoder.encode(texts)))
-    x = torch.from_numpy(np.stack([emb[feedforward_query(s.objects)] for s in samples]))
+def _tensors(samples: list[Sample], featurise) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``featurise`` maps object tuples to one input row each; it runs once per distinct tuple."""
+    sets = sorted({s.objects for s in samples})
+    rows = dict(zip(sets, np.asarray(featurise(sets), dtype=np.float32)))
+    x = torch.from_numpy(np.stack([rows[s.objects] for s in samples]))
     y = torch.tensor([GOALS.index(s.goal) for s in samples])
     w = torch.tensor([s.weight for s in samples], dtype=torch.float32)
     return x, y, w
+
+
+def _embed(encoder, texts: list[str]) -> np.ndarray:
+    """One embedding per text, each distinct text encoded once, in sorted order (batches, and so the
+    padding each text is encoded with, do not depend on the sample order)."""
+    unique = sorted(set(texts))
+    emb = dict(zip(unique, encoder.encode(unique)))
+    return np.stack([emb[t] for t in texts])
 
 
 @torch.inference_mode()
@@ -154,24 +188,27 @@ def _majority(yt, yv, wv) -> float:
 
 def train_any_head(head: str, data: list[str] | None = None, model: str = MINILM, out: str | Path | None = None,
                    gibson_rooms: str | Path | None = None, epochs: int | None = None, seed: int = 0) -> dict:
-    """``l3mvn train-head``: the frontier head from ``data`` or the room-list head from room data,
-    each with its own default epochs; flags that do not apply to ``head`` are refused."""
+    """``l3mvn train-head``: a frontier head from ``data`` or a room-list head from room data, on
+    sentence embeddings or (``*-bag``) bags of objects, each with its own default epochs; flags that
+    do not apply to ``head`` are refused."""
     from l3mvn.config.policy import HEAD_KINDS
     from l3mvn.language.frontier_head import train_frontier_head
 
     if head not in HEAD_KINDS:
         raise L3MVNError(f"unknown head {head!r}; valid: {', '.join(HEAD_KINDS)}")
-    if head == "rooms":
+    bag = is_bag(head)
+    if bag and model.lower() != MINILM:
+        raise L3MVNError(f"--model names a sentence embedder; the {head} head reads no sentence (drop --model)")
+    extra = {} if epochs is None else {"epochs": epochs}
+    if base_kind(head) == "rooms":
         if data:
-            raise L3MVNError("--data is frontier data, for --head frontiers; the rooms head reads --gibson-rooms")
-        return train_head(model=model, out=out, gibson_rooms=gibson_rooms, seed=seed,
-                          **({} if epochs is None else {"epochs": epochs}))
+            raise L3MVNError(f"--data is frontier data, for --head frontiers; the {head} head reads --gibson-rooms")
+        return train_head(model=model, out=out, gibson_rooms=gibson_rooms, seed=seed, bag=bag, **extra)
     if gibson_rooms:
-        raise L3MVNError("--gibson-rooms is room data, for --head rooms; the frontiers head reads --data")
-    command = f"{TRAIN_COMMAND} --head frontiers --data {' '.join(map(str, data or []))} --model {model}" + (
-        f" --epochs {epochs}" if epochs is not None else "") + f" --seed {seed}"
-    return train_frontier_head(data or [], model=model, out=out, seed=seed, command=command,
-                               **({} if epochs is None else {"epochs": epochs}))
+        raise L3MVNError(f"--gibson-rooms is room data, for --head rooms; the {head} head reads --data")
+    command = f"{TRAIN_COMMAND} --head {head} --data {' '.join(map(str, data or []))}" + (
+        "" if bag else f" --model {model}") + (f" --epochs {epochs}" if epochs is not None else "") + f" --seed {seed}"
+    return train_frontier_head(data or [], model=model, out=out, seed=seed, command=command, bag=bag, **extra)
 
 
-__all__ = ["Sample", "room_samples", "train_head", "train_any_head", "TRAIN_COMMAND"]
+__all__ = ["ROOMS_BAG", "TRAIN_COMMAND", "Sample", "room_samples", "train_any_head", "train_head"]

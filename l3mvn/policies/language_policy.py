@@ -80,7 +80,7 @@ class LanguageFrontierPolicy:
         made = shared_scorer(scorer, self.head if scorer == "feedforward" else None)
         if self.selection == "expected" and not getattr(made, "predicts_distance", False):
             raise L3MVNError(f"selection 'expected' needs a scorer that predicts distances (feedforward with "
-                             f"head 'frontiers'), not {scorer!r}; valid selections for it: paper, official_code")
+                             f"head 'frontiers' or 'frontiers-bag'), not {scorer!r}; valid selections for it: paper, official_code")
         return made
 
     def set_scorer(self, scorer: str) -> None:

@@ -1,7 +1,7 @@
 """Feed-forward scoring (the paper's second paradigm): "This frontier contains o1, ..., and ok." ->
 sentence embedding -> trained head -> one number per goal.
 
-Two heads share that architecture (``HEAD_KINDS``, chosen with ``head=``, a kind or a file):
+Four heads share that architecture (``HEAD_KINDS``, chosen with ``head=``, a kind or a file):
 
 - ``rooms``: trained on room object lists (the paper's recipe); its outputs are logits, softmax over
   goals (temperature 1) is p(goal), and only informative objects enter the sentence.
@@ -10,6 +10,10 @@ Two heads share that architecture (``HEAD_KINDS``, chosen with ``head=``, a kind
   category enters the sentence (the file's ``object_filter``: the data showed couch, vase, book and
   clock, none of them informative for rooms, moving a toilet 1-2 m away). p(goal) =
   softmax over goals of -metres / ``distance_temperature_m``: which goal lies nearest through it.
+- ``rooms-bag``, ``frontiers-bag``: the same heads trained the same way on a multi-hot bag of the
+  objects (``head.bag_features``) instead of the sentence embedding: the ablation without the
+  language model. No sentence is written and the embedder is never imported or loaded; the query
+  shown for a frontier is the bag itself ("bag of objects: ..."), the only thing the head reads.
 
 One forward per unique object set gives all six outputs; they fill six cache entries.
 """
@@ -24,7 +28,14 @@ import torch
 
 from l3mvn.config.policy import DEFAULT_HEAD, HEAD_KINDS
 from l3mvn.errors import L3MVNError
-from l3mvn.language.head import SHIPPED_HEADS, load_head
+from l3mvn.language.head import (
+    BAG_FEATURES,
+    SHIPPED_HEADS,
+    bag_features,
+    base_kind,
+    is_bag,
+    load_head,
+)
 from l3mvn.language.models import MINILM, load_sentence_encoder
 from l3mvn.language.queries import feedforward_query
 from l3mvn.language.scorers.base import ObjectKey, Scorer, register
@@ -39,14 +50,15 @@ class FeedForwardScorer(Scorer):
         super().__init__(**kw)
         head = DEFAULT_HEAD if head is None else head
         if isinstance(head, str) and head in HEAD_KINDS:
-            key = model.lower() if head == "rooms" else f"{model.lower()}-{head}"
+            key = head if is_bag(head) else model.lower() if head == "rooms" else f"{model.lower()}-{head}"
             if key not in SHIPPED_HEADS:
                 raise L3MVNError(
                     f"no shipped head of kind {head!r} for embedder {model!r} (shipped: {', '.join(SHIPPED_HEADS)}); "
                     "train one with `l3mvn train-head --model ...` and pass head=<file>"
                 )
             head = SHIPPED_HEADS[key]
-        self.model_name = model
+        elif isinstance(head, str) and not Path(head).exists():
+            raise L3MVNError(f"unknown feed-forward head {head!r}; valid: {', '.join(HEAD_KINDS)} or a head file")
         self.head, self.meta = load_head(head)
         if tuple(self.meta.get("goals", ())) != self.goals:
             raise L3MVNError(f"head {head} was trained for goals {self.meta.get('goals')}, not {self.goals}")
@@ -55,25 +67,41 @@ class FeedForwardScorer(Scorer):
             raise L3MVNError(f"head {head} is of kind {self.kind!r}; valid: {', '.join(HEAD_KINDS)}")
         if "object_filter" not in kw:
             self.object_filter = self.meta.get("object_filter", self.object_filter)
-        self.encoder = load_sentence_encoder(model)
-        if self.encoder.dim != self.head.in_dim:
-            raise L3MVNError(f"head {head} expects {self.head.in_dim}-d embeddings; {model!r} gives {self.encoder.dim}")
+        # A bag head reads its vocabulary's multi-hot vector: no sentence encoder is loaded at all.
+        self.vocabulary: tuple[str, ...] | None = None
+        self.encoder = None
+        if self.meta.get("features") == BAG_FEATURES:
+            self.vocabulary = tuple(self.meta.get("vocabulary", ()))
+            if len(self.vocabulary) != self.head.in_dim:
+                raise L3MVNError(f"head {head}: a vocabulary of {len(self.vocabulary)} objects for a "
+                                 f"{self.head.in_dim}-d input")
+            self.model_name = None
+        else:
+            self.model_name = model
+            self.encoder = load_sentence_encoder(model)
+            if self.encoder.dim != self.head.in_dim:
+                raise L3MVNError(f"head {head} expects {self.head.in_dim}-d embeddings; {model!r} gives {self.encoder.dim}")
         self._metres: dict[ObjectKey, np.ndarray] = {}
 
     @property
     def predicts_distance(self) -> bool:
-        return self.kind == "frontiers"
+        return base_kind(self.kind) == "frontiers"
+
+    def features(self, keys: list[ObjectKey]) -> np.ndarray:
+        """The head's input rows: the bag of objects, or the embedding of the paper's sentence."""
+        if self.vocabulary is not None:
+            return bag_features(keys, self.vocabulary)
+        return self.encoder.encode([feedforward_query(k) for k in keys])
 
     @torch.inference_mode()
     def logits(self, keys: list[ObjectKey]) -> torch.Tensor:
-        emb = self.encoder.encode([feedforward_query(k) for k in keys])
-        return self.head(torch.from_numpy(emb))
+        return self.head(torch.from_numpy(self.features(keys)))
 
     def expected_distance(self, object_sets: Sequence[Iterable[str]]) -> np.ndarray:
         """(frontiers, goals) expected metres from each frontier to each goal (frontier head only);
         a frontier with no object gets the head's answer for "nothing", which the data taught too."""
         if not self.predicts_distance:
-            raise L3MVNError(f"the {self.kind} head predicts p(goal), not distances; use the frontiers head")
+            raise L3MVNError(f"the {self.kind} head predicts p(goal), not distances; use a frontiers head")
         keys = [tuple(sorted(self.query_objects(s))) for s in object_sets]
         new = [k for k in dict.fromkeys(keys) if k not in self._metres]
         if new:
@@ -85,9 +113,14 @@ class FeedForwardScorer(Scorer):
         self._metres.clear()
 
     def queries(self, objects) -> dict[str, str]:
-        """One sentence for all goals: the head reads its embedding and outputs every goal's number."""
+        """One input for all goals: the head reads the sentence's embedding (or the bag of objects,
+        shown as such: no sentence exists for a bag head) and outputs every goal's number."""
         key = self.query_objects(objects)
-        return {"all goals": feedforward_query(key)} if key else {}
+        if not key:
+            return {}
+        if self.vocabulary is not None:
+            return {"all goals": "bag of objects: " + ", ".join(o for o in key if o in self.vocabulary)}
+        return {"all goals": feedforward_query(key)}
 
     def _raw_scores(self, pairs: list[tuple[ObjectKey, str]]) -> Sequence[float]:
         keys = list(dict.fromkeys(objs for objs, _ in pairs))
