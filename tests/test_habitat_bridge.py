@@ -355,3 +355,36 @@ def test_a_killed_habitat_server_is_one_line(exported):
         env.step("move_forward")
     assert "\n" not in str(err.value)
     env.close()
+
+
+@pytest.mark.parametrize("radius", [0.18, 0.1, 0.25, 0.3])
+def test_the_navmesh_cell_divides_the_body_radius(radius):
+    """Recast erodes by ceil(radius / cell) voxels in float32: that must be the radius, not a voxel more."""
+    cell = wire.navmesh_cell_size(radius)
+    assert cell <= wire.NAVMESH_MAX_CELL_M * 1.001
+    voxels = math.ceil(np.float32(radius) / np.float32(cell))
+    assert voxels * cell == pytest.approx(radius, rel=1e-4)
+
+
+@needs_habitat
+def test_habitat_keeps_the_passages_our_grid_keeps(tmp_path):
+    """House 1's first episode crosses a door within a voxel of the body's width: with habitat's
+    default 0.05 m cells its navmesh closed it (geodesic 2.06 x the file's); with the fitted cell
+    every habitat geodesic is the file's within 5%."""
+    from l3mvn.datasets import load_episode_set
+    from l3mvn.datasets.hm3d_export import export_hm3d
+
+    config = Config(sim=SimConfig(frame_height=30, frame_width=40))
+    summary = export_hm3d(tmp_path, 2, seed=0, episodes_per_floor=4, cfg=config)
+    eset = load_episode_set(summary.dataset_dir, "val", scenes_dir=summary.scenes_dir, cfg=config)
+    ratios = {}
+    for key in dict.fromkeys(eset.scene_of(e).key for e in eset.episodes):
+        episodes = [e for e in eset.episodes if eset.scene_of(e).key == key]
+        floor = eset.scene_of(episodes[0])
+        with habitat_floor_environment(HABITAT_PYTHON, floor, config.sim) as env:
+            for episode in episodes:
+                env.reset(episode)
+                got = env.geodesic_distance(episode.start, [tuple(p) for p in floor.view_points[episode.goal]])
+                ratios[episode.key] = got / episode.geodesic_distance_m
+    assert len(ratios) == 8 and "procedural-0001/0/0" in ratios
+    assert all(0.95 < r < 1.05 for r in ratios.values()), ratios

@@ -37,6 +37,11 @@ DTYPES = ("|u1", "<i4", "<u4", "<i8", "<f4", "<f8")
 # above the floor: habitat's default 0.2 m would lift the 0.88 m camera by that much (depth off by
 # 5 cm looking down at -60 deg with 0.05 m voxels, by 1 cm with these).
 NAVMESH_CELL_HEIGHT_M = 0.01
+# The navmesh's largest voxel width. Recast erodes by ceil(radius / cell) voxels: at habitat's
+# default 0.05 m a 0.18 m body is eroded by 0.2 m, which closes passages within a voxel of twice
+# the body's width that our grid (and the body) can pass. The server picks the widest cell up to
+# this that divides the radius, so the erosion is the body's radius (0.18 m: 0.02 m cells).
+NAVMESH_MAX_CELL_M = 0.02
 ACTIONS = ("stop", "move_forward", "turn_left", "turn_right", "look_up", "look_down")
 
 
@@ -205,6 +210,14 @@ def _rotation(value):
     return w / norm, x / norm, y / norm, z / norm
 
 
+def navmesh_cell_size(radius_m, max_cell_m=NAVMESH_MAX_CELL_M):
+    """The widest navmesh cell <= ``max_cell_m`` that divides ``radius_m`` into whole voxels, so
+    recast's erosion (``ceil(radius / cell)`` voxels) is the radius itself, not up to a voxel more.
+    A hair wider than the exact quotient: recast divides in float32, where 0.18 / 0.02 is 9.000001."""
+    voxels = math.ceil(radius_m / max_cell_m - 1e-9)
+    return radius_m / voxels * (1.0 + 1e-5)
+
+
 class HabitatBackend:
     """habitat-sim with the client's sensors, body and actions; semantic ids through the scene's
     objects and the client's category table; geodesics from habitat's pathfinder."""
@@ -279,6 +292,7 @@ class HabitatBackend:
         settings.agent_radius = cfg["agent_radius_m"]
         settings.agent_height = cfg["camera_height_m"]
         settings.cell_height = NAVMESH_CELL_HEIGHT_M
+        settings.cell_size = navmesh_cell_size(cfg["agent_radius_m"])
         if "max_climb_m" in request["sim"]:
             settings.agent_max_climb = _num(request, "sim", "max_climb_m")
         if not self.sim.recompute_navmesh(self.sim.pathfinder, settings):
