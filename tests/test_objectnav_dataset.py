@@ -147,6 +147,18 @@ def test_mp3d_layout_with_a_z_up_stage(exported, tmp_path):
     assert [ep.start for ep in eset.episodes] == [ep.start for ep in hm3d.episodes]
 
 
+def test_a_scan_without_semantic_annotation_says_its_goals_cannot_be_seen(exported, tmp_path, caplog):
+    """A stage with no ``.semantic.glb`` / ``.semantic.txt`` (MP3D's .house, Gibson's scene graphs)
+    loads, and says that no goal can be seen rather than failing every episode silently."""
+    scans = tmp_path / "scene_datasets"
+    shutil.copytree(exported / "scene_datasets", scans)
+    for suffix in (".semantic.glb", ".semantic.txt"):
+        (scans / "hm3d_v0.2" / "val" / f"00000-{SCENE}" / f"{SCENE}{suffix}").unlink()
+    with caplog.at_level("WARNING", logger="l3mvn.datasets.objectnav"):
+        eset = load_episode_set(exported / "objectnav_hm3d_v2", "val", scenes_dir=scans)
+    assert eset.episodes and "no goal object can be seen" in caplog.text and "--sim habitat" in caplog.text
+
+
 # --- one line for every bad input ---------------------------------------------------------------
 
 def test_corrupt_split_file(exported, tmp_path):

@@ -13,6 +13,8 @@ textures (such a stage renders in its materials' flat colours). The format is re
 
 from __future__ import annotations
 
+import logging
+
 import math
 import re
 from dataclasses import dataclass
@@ -33,6 +35,8 @@ from l3mvn.types import Episode, Pose
 FORMAT_RULES: dict[str, str] = {
     "objectnav_hm3d_v1": "hm3d", "objectnav_hm3d_v2": "hm3d", "objectnav_mp3d": "mp3d", "objectnav_gibson": "semexp",
 }
+log = logging.getLogger(__name__)
+
 # Habitat's navmesh and our grid disagree by a cell or two at walls: a start this close to our
 # navigable floor moves onto it; farther is an error.
 START_SNAP_M = 0.25
@@ -210,6 +214,10 @@ def _with_semantics(stage: Path, root: Path) -> ScanFiles:
         missing = semantic_txt if semantic_glb.is_file() else semantic_glb
         raise L3MVNError(f"scan {stage}: {missing.name} is missing beside it (a semantic mesh needs its table)")
     has = semantic_glb.is_file()
+    if not has:  # e.g. MP3D's .house or Gibson's 3DSceneGraph: formats this reader does not read yet
+        log.warning("scan %s has no HM3D semantic annotation (%s + %s): no goal object can be seen on our "
+                    "renderer, so its episodes cannot succeed; MP3D and Gibson semantics run with --sim habitat",
+                    stage, semantic_glb.name, semantic_txt.name)
     return ScanFiles(stage, semantic_glb if has else None, semantic_txt if has else None, scene_up_axis(config))
 
 
