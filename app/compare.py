@@ -269,9 +269,22 @@ def compare_recordings(path_a: str | Path, path_b: str | Path, key: str) -> Comp
     if (ep_a.scene, ep_a.episode_id) != (ep_b.scene, ep_b.episode_id):
         raise L3MVNError(f"{Path(path_a).name} and {Path(path_b).name} record different episodes "
                          f"({ep_a.scene} #{ep_a.episode_id} vs {ep_b.scene} #{ep_b.episode_id})")
+    _share_crop(ep_a, ep_b)
     a, b = _side("A", ep_a), _side("B", ep_b)
     goal = ep_a.steps[0].goal if ep_a.steps else "?"
     return Comparison(key, goal, a, b, first_difference(a.decisions, b.decisions))
+
+
+def _share_crop(ep_a: RecordedEpisode, ep_b: RecordedEpisode) -> None:
+    """Both maps cut to one crop (the union of each side's), so a cell lies at the same place in both
+    pictures and one scale reads both; only when both maps share a frame (the agent starts on the same
+    map pixel at its first mapped step: same episode, same map size), else each keeps its own."""
+    starts = [next((tuple(np.round(s.agent[0], 3)) for s in ep.steps if s.agent is not None), None)
+              for ep in (ep_a, ep_b)]
+    if starts[0] is None or starts[0] != starts[1]:
+        return
+    (r0, r1, c0, c1), (s0, s1, d0, d1) = ep_a.box, ep_b.box
+    ep_a.box = ep_b.box = (min(r0, s0), max(r1, s1), min(c0, d0), max(c1, d1))
 
 
 def _side(letter: str, ep: RecordedEpisode) -> Side:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from app.compare import (
+    PICTURE_HEIGHT,
     Contender,
     EpisodeSource,
     StepDecision,
@@ -97,6 +98,9 @@ def test_two_policies_on_one_episode(tmp_path):
     assert np.array_equal(again.picture(k), c.picture(k))
     assert not np.array_equal(c.picture(k), c.picture(0))
     assert c.picture(k).shape[1] > c.a.picture(k).shape[1] + c.b.picture(k).shape[1]
+    # one crop for both maps: before their decisions part, both sides draw the same map pixel for pixel
+    assert c.a.picture(0).shape == c.b.picture(0).shape
+    assert np.array_equal(c.a.picture(0)[:PICTURE_HEIGHT], c.b.picture(0)[:PICTURE_HEIGHT])
 
 
 def test_two_configs_of_one_policy_and_unequal_lengths(tmp_path):
