@@ -91,7 +91,13 @@ class ComparePanel:
         # Outside the folder: a comparison opened from the Results panel shows with the folder closed.
         self.picture = gui.add_html(NO_PICTURE)
         self._held = (self.policy_a, self.policy_b, self.run, self.step, self.jump)
+        self._followed = first  # the dashboard policy A last took
         self._wire(on)
+
+    def follow_policy(self, name: str) -> None:
+        """Policy A follows the dashboard's policy until the user picks another A here."""
+        if self.policy_a.value == self._followed and name in self.policy_a.options and not self.busy:
+            self.policy_a.value = self._followed = name
 
     @property
     def inputs(self) -> tuple:

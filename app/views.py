@@ -237,6 +237,8 @@ class DashboardView:
         @self._on(self.policy)
         def _(event: viser.GuiEvent) -> None:
             ctl.set_policy(self.policy.value, client_id=event.client_id)
+            if self.compare is not None:
+                self.compare.follow_policy(self.policy.value)
 
         @self._on(self.scorer)
         def _(event: viser.GuiEvent) -> None:

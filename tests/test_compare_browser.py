@@ -122,6 +122,21 @@ def test_a_policy_that_cannot_be_compared_is_not_offered(dash):
     assert "teleop" not in options and "oracle" not in options and "cost-utility" in options
 
 
+def test_policy_a_follows_the_dashboard_policy_until_picked_here(dash):
+    panel = dash.view.compare
+    start = panel.policy_a.value
+    try:
+        panel.follow_policy("random-sample")
+        assert panel.policy_a.value == "random-sample"
+        panel.follow_policy("teleop")  # not comparable: A stays
+        assert panel.policy_a.value == "random-sample"
+        panel.policy_a.value = "l3mvn-zs"  # the user's own pick
+        panel.follow_policy("cost-utility")
+        assert panel.policy_a.value == "l3mvn-zs"
+    finally:
+        panel.policy_a.value = panel._followed = start
+
+
 @pytest.fixture(scope="module")
 def results_dash(tmp_path_factory):
     d = tmp_path_factory.mktemp("results")
