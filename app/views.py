@@ -28,6 +28,7 @@ from app.client_input import ray_refusal, update_refusal
 from app.compare_view import ComparePanel, EpisodeSource
 from app.language_panel import language_html
 from app.map_image import GT_FLOOR, GT_GOAL, GT_REGION, ground_truth_layer, score_color
+from app.recordings_view import RecordingsPanel
 from app.results_view import ResultsPanel, ResultsSource
 from app.session_worker import DEFAULT_SCORER, FRAME_WIDTH, MAX_SPEED, MIN_SPEED, DashboardController
 from app.state import Cell, FrontierMarker, MapView, Notice, Snapshot
@@ -140,7 +141,7 @@ class DashboardView:
                                                                  compare=self.compare)
         self._build_scene()
         panel_inputs = ((() if self.results is None else self.results.inputs)
-                        + (() if self.compare is None else self.compare.inputs))
+                        + (() if self.compare is None else self.compare.inputs) + self.recordings.inputs)
         self._inputs = {handle_uuid(h): h for h in (*vars(self).values(), *panel_inputs) if isinstance(h, _INPUTS)}
         check_gui_updates(server, self._admit_update)
         ignore_client_messages_except(server, "GuiUpdateMessage", "ScenePointerMessage")  # controls, map clicks
@@ -198,9 +199,7 @@ class DashboardView:
             self.frontier_table = gui.add_markdown(_no_map_markdown(ctl.policy_name, started=False))
         with gui.add_folder("Language"):
             self.language = gui.add_html(language_html(None, ctl.policy_name))
-        with gui.add_folder("Recordings"):
-            self.recordings = gui.add_markdown(_recordings_markdown(ctl.record_dir))
-            self.refresh_recordings = gui.add_button("Refresh list")
+        self.recordings = RecordingsPanel(gui, lambda: ctl.record_dir, self.server.get_host(), on=self._on, tell=self._tell)
         with gui.add_folder("Legend"):
             self.legend = gui.add_html(_legend_html(legend(GOAL_CATEGORIES), target=first.goal))
         self._listed_episodes = 0
@@ -210,10 +209,6 @@ class DashboardView:
 
     def _wire_gui(self) -> None:
         ctl = self.ctl
-
-        @self._on(self.refresh_recordings)
-        def _(event: viser.GuiEvent) -> None:
-            self.recordings.content = _recordings_markdown(ctl.record_dir)
 
         @self._on(self.scene)
         def _(event: viser.GuiEvent) -> None:
@@ -464,6 +459,7 @@ class DashboardView:
             self._closed = True
             self._wake.notify()
         self._thread.join(timeout=5.0)
+        self.recordings.close()
 
     def _draw_loop(self) -> None:
         while True:
@@ -486,7 +482,7 @@ class DashboardView:
                                     f"SR {m.sr:.2f}, SPL {m.spl:.2f}")
             if m.episodes != self._listed_episodes:  # a finished episode may have written a recording
                 self._listed_episodes = m.episodes
-                self.recordings.content = _recordings_markdown(self.ctl.record_dir)
+                self.recordings.refresh()
             buttons = BUTTONS_RUNNING if snap.running or snap.run_queued else BUTTONS_PAUSED
             if tuple(self.controls.options) != buttons:
                 self.controls.options = buttons
@@ -805,19 +801,6 @@ def _unavailable_markdown(problems: dict[str, str]) -> str:
         return "_every scorer's weights are on disk_"
     lines = "\n".join(f"- `{name}`: {why}" for name, why in problems.items())
     return f"**Unavailable scorers** (refused if picked):\n{lines}"
-
-
-def _recordings_markdown(record_dir, limit: int = 8) -> str:
-    """The newest recordings and how to open them (replay runs rerun's viewer, outside the page)."""
-    from l3mvn.recording import list_recordings
-
-    found = list_recordings(record_dir)
-    if not found:
-        return f"_no recordings in `{record_dir}/` yet: tick Record (.rrd), then Reset_"
-    lines = [f"{len(found)} in `{record_dir}/`, newest first; open one with `l3mvn replay FILE --web`:", ""]
-    for info in found[:limit]:
-        lines.append(f"- `{info.path.name}` ({info.size_bytes / 1e6:.1f} MB)")
-    return "\n".join(lines)
 
 
 def _swatch(rgb, *, ring: bool = False) -> str:

@@ -204,9 +204,10 @@ def test_a_recorded_episode_is_written_and_listed_on_the_page(dash, ctl, tmp_pat
     files = list(tmp_path.glob("*.rrd"))
     assert len(files) == 1 and files[0].name.endswith("_oracle.rrd")
     deadline = time.monotonic() + 5
-    while files[0].name not in dash.view.recordings.content and time.monotonic() < deadline:
+    while files[0].name not in dash.view.recordings.listing.content and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert files[0].name in dash.view.recordings.content
+    assert files[0].name in dash.view.recordings.listing.content
+    assert dash.view.recordings.pick.value == files[0].name  # offered to "Open in rerun"
 
 
 def test_an_exception_in_the_worker_is_shown_and_the_worker_keeps_serving(ctl):

@@ -16,11 +16,12 @@ import subprocess
 import sys
 from collections.abc import Callable
 from contextlib import suppress
+from dataclasses import dataclass
 from pathlib import Path
 
 from l3mvn.errors import L3MVNError
-from l3mvn.serving import check_listen_address, interrupt_on_stop_signals
 from l3mvn.recording.catalogue import RecordingCut, open_recording, read_recording
+from l3mvn.serving import check_listen_address, interrupt_on_stop_signals
 
 DEFAULT_WEB_PORT = 9090
 STOP_GRACE_S = 5.0  # rerun exits at once on SIGTERM; one that has not by then is killed
@@ -50,6 +51,36 @@ def run_replay(args: argparse.Namespace) -> int:
     with interrupt_on_stop_signals():
         cmd = _web_command(exe, path, args.host, args.port) if args.web else _native_command(exe, path)
         return run_viewer(cmd)
+
+
+@dataclass
+class WebViewer:
+    """rerun's web viewer serving one recording, a child of this process (``stop()`` ends it; it also
+    dies with this process)."""
+
+    path: Path
+    url: str
+    proc: subprocess.Popen
+
+    @property
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self) -> None:
+        _stop(self.proc)
+
+
+def start_web_viewer(path: str | Path, host: str = "127.0.0.1") -> WebViewer:
+    """Serve ``path`` in rerun's web viewer on free ports of ``host`` (for the dashboard's "Open in
+    rerun": no terminal needed); one-line L3MVNError for a file the viewer cannot show."""
+    path = Path(path)
+    _check_recording(path)
+    exe = viewer_executable()
+    port = _free_port(host)
+    cmd = _web_command(exe, path, host, port)
+    url = web_viewer_url(port, int(cmd[cmd.index("--port") + 1]), _url_host(host))
+    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, **_child_options())
+    return WebViewer(path, url, proc)
 
 
 def _check_recording(path: Path) -> None:

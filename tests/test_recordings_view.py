@@ -1,0 +1,60 @@
+"""The Recordings folder: "Open in rerun" serves a recording in rerun's web viewer, linked in the page."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+import urllib.request
+
+import pytest
+from conftest import free_port
+
+from app.server import start_dashboard
+from l3mvn.errors import L3MVNError
+
+
+@pytest.fixture(scope="module")
+def dash(tmp_path_factory):
+    rec = tmp_path_factory.mktemp("rec")
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
+    subprocess.run([sys.executable, "-m", "app.cli", "eval", "--policy", "frontier", "--houses", "1",
+                    "--episodes-per-house", "2", "--frame", "120x160", "--set", "sim.max_steps=15",
+                    "--out", str(rec / "out.jsonl"), "--record", "--record-dir", str(rec)],
+                   check=True, capture_output=True, env=env, timeout=600)
+    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="frontier", record_dir=rec)
+    yield d
+    d.stop()
+
+
+def _answers(url: str, timeout: float = 30.0) -> int:
+    """The viewer's HTTP status once it listens (it starts in a second or two)."""
+    end = time.monotonic() + timeout
+    while True:
+        try:
+            with urllib.request.urlopen(url, timeout=5) as reply:
+                return reply.status
+        except OSError:
+            if time.monotonic() > end:
+                raise
+            time.sleep(0.3)
+
+
+def test_open_in_rerun_serves_the_recording_and_links_it(dash):
+    panel = dash.view.recordings
+    names = panel.pick.options
+    assert len(names) == 2 and all(n.endswith(".rrd") for n in names) and not panel.pick.disabled
+    first = panel.open(names[0])
+    assert first.alive and _answers(first.url) == 200
+    assert first.url in panel.link.content and names[0] in panel.link.content
+    second = panel.open(names[1])  # one viewer at a time: the first one stops
+    assert not first.alive and second.alive and _answers(second.url) == 200
+    dash.view.recordings.close()
+    assert not second.alive
+
+
+def test_only_recordings_of_the_folder_can_be_opened(dash):
+    with pytest.raises(L3MVNError, match=r"^no recording '\.\./x\.rrd' in .*; valid: .*\.rrd") as info:
+        dash.view.recordings.open("../x.rrd")
+    assert "\n" not in str(info.value)
