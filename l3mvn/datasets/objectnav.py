@@ -14,7 +14,6 @@ textures (such a stage renders in its materials' flat colours). The format is re
 from __future__ import annotations
 
 import logging
-
 import math
 import re
 from dataclasses import dataclass
