@@ -46,7 +46,8 @@ NO_PICTURE = ""  # until a comparison exists
 _ORDER = itertools.count(1)  # overlays opened later lie on top of earlier ones
 
 
-def main_view_html(rgb: np.ndarray, title: str, *, main_view: bool) -> str:
+def main_view_html(rgb: np.ndarray, title: str, *, main_view: bool,
+                   note: str = 'untick "Show in main view" for the live map') -> str:
     """``rgb`` as a PNG in the page (lossless: the page receives exactly these pixels): over the main
     view (left of the control panel, scaled to fill it, under a title bar), or in the panel at its width."""
     src = "data:image/png;base64," + base64.b64encode(png_bytes(rgb)).decode("ascii")
@@ -54,7 +55,7 @@ def main_view_html(rgb: np.ndarray, title: str, *, main_view: bool) -> str:
     if not main_view:
         return f"<div>{img}display:block'></div>"
     head = (f"<div style='color:#eee;font:600 14px sans-serif;padding:6px 10px'>{escape(title)} "
-            "<span style='font-weight:400;color:#aaa'>(untick \"Show in main view\" for the live map)</span></div>")
+            f"<span style='font-weight:400;color:#aaa'>({escape(note)})</span></div>")
     return (f"<div class='l3mvn-main-view' style='position:fixed;left:0;top:0;bottom:0;"
             f"width:calc(100vw - 440px);z-index:{10 + next(_ORDER)};background:#181818;display:flex;"
             f"flex-direction:column'>{head}<div style='flex:1;min-height:0;display:flex;align-items:center;"

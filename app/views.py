@@ -27,6 +27,7 @@ import viser
 from app.client_input import ray_refusal, update_refusal
 from app.compare_view import ComparePanel, EpisodeSource
 from app.language_panel import language_html
+from app.history_view import HistoryPanel
 from app.map_image import GT_FLOOR, GT_GOAL, GT_REGION, ground_truth_layer, score_color
 from app.recordings_view import RecordingsPanel
 from app.results_view import ResultsPanel, ResultsSource
@@ -141,12 +142,14 @@ class DashboardView:
                                                                  compare=self.compare)
         self._build_scene()
         panel_inputs = ((() if self.results is None else self.results.inputs)
-                        + (() if self.compare is None else self.compare.inputs) + self.recordings.inputs)
+                        + (() if self.compare is None else self.compare.inputs)
+                        + self.recordings.inputs + self.history.inputs)
         self._inputs = {handle_uuid(h): h for h in (*vars(self).values(), *panel_inputs) if isinstance(h, _INPUTS)}
         check_gui_updates(server, self._admit_update)
         ignore_client_messages_except(server, "GuiUpdateMessage", "ScenePointerMessage")  # controls, map clicks
         run_script_on_connect(server, SHORTCUTS_JS)
         controller.on_snapshot(self._on_snapshot)
+        controller.on_snapshot(self.history.add)
         controller.on_notice(self._on_notice)
         self._thread = threading.Thread(target=self._draw_loop, name="l3mvn-dashboard-view", daemon=True)
         self._thread.start()
@@ -199,6 +202,7 @@ class DashboardView:
             self.frontier_table = gui.add_markdown(_no_map_markdown(ctl.policy_name, started=False))
         with gui.add_folder("Language"):
             self.language = gui.add_html(language_html(None, ctl.policy_name))
+        self.history = HistoryPanel(gui, on=self._on, tell=self._tell)
         self.recordings = RecordingsPanel(gui, lambda: ctl.record_dir, self.server.get_host(), on=self._on, tell=self._tell)
         with gui.add_folder("Legend"):
             self.legend = gui.add_html(_legend_html(legend(GOAL_CATEGORIES), target=first.goal))
@@ -460,6 +464,7 @@ class DashboardView:
             self._wake.notify()
         self._thread.join(timeout=5.0)
         self.recordings.close()
+        self.history.close()
 
     def _draw_loop(self) -> None:
         while True:
