@@ -101,7 +101,7 @@ def test_run_before_reset_starts_the_episode_and_keys_drive_it(dash, page):
     if ctl.session is not None:
         pytest.skip("needs a dashboard with no episode yet (run this module's tests in order)")
     ctl.set_speed(1)  # slow enough that the episode is still on when the keys are tried
-    page.get_by_role("button", name="Run").click()
+    page.get_by_role("button", name="Run", exact=True).click()
     page.get_by_text("no episode yet: starting episode").first.wait_for(timeout=20_000)
     _wait(lambda: (_step_shown(page) or 0) >= 1 and _state(page) == "running", timeout=90, what="the run")
     # Space on the focused Run/Pause button: one toggle, not two.
@@ -133,7 +133,7 @@ def test_a_reset_shows_it_is_busy_holds_the_controls_and_queues_a_run(dash, page
         _wait(lambda: _input(page, dash.view.scene.value).is_disabled(), what="Scene held")
         assert _input(page, dash.view.policy.value).is_disabled()
         page.screenshot(path=str(page.shots / "dashboard_busy.png"))
-        page.get_by_role("button", name="Run").click()
+        page.get_by_role("button", name="Run", exact=True).click()
         page.get_by_text("Run queued").first.wait_for(timeout=20_000)
     finally:
         hold.set()
@@ -155,11 +155,11 @@ def test_a_finished_run_says_finished_and_its_outcome_stays(dash, page):
     page.keyboard.press("r")
     _wait(lambda: _step_shown(page) == 0 and f"{nearest.key} (oracle)" in _panel_text(page), timeout=60,
           what="the nearest episode reset")
-    page.get_by_role("button", name="Run").click()
+    page.get_by_role("button", name="Run", exact=True).click()
     _wait(lambda: _state(page) == "finished", timeout=120, what="the end of the episode")
     text = _panel_text(page)
     assert "SUCCESS" in text and _state(page) == "finished"
-    assert page.get_by_role("button", name="Run").count() == 1  # the group offers Run again, not Pause
+    assert page.get_by_role("button", name="Run", exact=True).count() == 1  # the group offers Run again, not Pause
     time.sleep(NOTICE_SECONDS + 1.5)
     assert page.get_by_text("Episode over").count() >= 1, "the outcome notice closed by itself"
     page.screenshot(path=str(page.shots / "dashboard_finished.png"))

@@ -82,7 +82,7 @@ def test_filter_open_and_scrub_an_episode(dash, page):
     assert [r.label for r in panel._shown] == [r.label for r in failed]
     target = failed[0]
     _wait(lambda: page.locator(f"input[value='{target.label}']:visible").count() > 0, what="the episode list")
-    page.get_by_role("button", name="Open").click()
+    page.get_by_role("button", name="Open", exact=True).click()
     page.get_by_text("opened ").first.wait_for(timeout=60_000)
     pictures, _ = recording_frames(recording_of(panel.source.recordings_dir, target))
     k = min(7, len(pictures) - 1)
