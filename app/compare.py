@@ -26,7 +26,9 @@ from l3mvn.config import Config
 from l3mvn.errors import L3MVNError, first_line
 from l3mvn.eval.job import EvalJob
 from l3mvn.recording.catalogue import find_recording
-from l3mvn.recording.video import RecordedEpisode, VideoOptions, frames, read_episode
+from l3mvn.recording.video import (
+    FONT, PANEL_BG, TEXT_RGB, RecordedEpisode, VideoOptions, fit_text, frames, read_episode,
+)
 from l3mvn.registry import ALIASES, DIRECT_POLICIES, POLICY_NAMES, TELEOP
 
 PICTURE_HEIGHT = 400  # pixels of a side's map panel: the map is what is compared, so it leads
@@ -34,9 +36,6 @@ CAMERA_SCALE = 0.6  # the camera frame under it, at this share of the map panel'
 _GAP = 12
 _CAPTION = 40
 _BAND = 78
-_FONT = cv2.FONT_HERSHEY_SIMPLEX
-_BG = (24, 24, 24)
-_TEXT = (235, 235, 235)
 _DIM = (175, 175, 175)
 _DIFF_RGB = (255, 200, 40)
 _ENDED_RGB = (120, 120, 120)
@@ -152,7 +151,7 @@ class Comparison:
         step = min(max(int(step), 0), self.steps - 1)
         sides = [_captioned(s, step, step == self.first_difference) for s in (self.a, self.b)]
         h = max(p.shape[0] for p in sides)
-        out = np.full((h, sides[0].shape[1] + _GAP + sides[1].shape[1], 3), _BG, np.uint8)
+        out = np.full((h, sides[0].shape[1] + _GAP + sides[1].shape[1], 3), PANEL_BG, np.uint8)
         out[: sides[0].shape[0], : sides[0].shape[1]] = sides[0]
         out[: sides[1].shape[0], sides[0].shape[1] + _GAP:] = sides[1]
         return out
@@ -308,30 +307,30 @@ def _restack(frame: np.ndarray, camera_w: int, d: StepDecision, last: int) -> np
     ch, cw = round(h * CAMERA_SCALE), round(camera_w * CAMERA_SCALE)
     small = cv2.resize(camera, (cw, ch), interpolation=cv2.INTER_AREA)
     width = max(map_panel.shape[1], cw)
-    out = np.full((h + 4 + ch + _BAND, width, 3), _BG, np.uint8)
+    out = np.full((h + 4 + ch + _BAND, width, 3), PANEL_BG, np.uint8)
     out[:h, :map_panel.shape[1]] = map_panel
     out[h + 4: h + 4 + ch, :cw] = small
     y = h + 4 + ch
-    cv2.putText(out, f"step {d.step}/{last}", (8, y + 24), _FONT, 0.65, _TEXT, 1, cv2.LINE_AA)
+    cv2.putText(out, f"step {d.step}/{last}", (8, y + 24), FONT, 0.65, TEXT_RGB, 1, cv2.LINE_AA)
     for i, line in enumerate(_wrap(d.line, width - 16, 0.5)[:2]):
-        cv2.putText(out, line, (8, y + 48 + 22 * i), _FONT, 0.5, _DIM, 1, cv2.LINE_AA)
+        cv2.putText(out, line, (8, y + 48 + 22 * i), FONT, 0.5, _DIM, 1, cv2.LINE_AA)
     return out
 
 
 def _captioned(side: Side, step: int, differs: bool) -> np.ndarray:
     body = side.picture(step)
-    out = np.full((_CAPTION + body.shape[0], body.shape[1], 3), _BG, np.uint8)
+    out = np.full((_CAPTION + body.shape[0], body.shape[1], 3), PANEL_BG, np.uint8)
     out[_CAPTION:] = body
-    cv2.putText(out, side.label, (8, 28), _FONT, 0.8, _TEXT, 2, cv2.LINE_AA)
+    cv2.putText(out, side.label, (8, 28), FONT, 0.8, TEXT_RGB, 2, cv2.LINE_AA)
     if step > side.last_step:
         text = f"ended at step {side.last_step} ({_outcome_word(side)})"
         cv2.rectangle(out, (0, _CAPTION), (out.shape[1] - 1, _CAPTION + 44), _ENDED_RGB, -1)
-        cv2.putText(out, _fit(text, out.shape[1] - 16, 0.7), (8, _CAPTION + 30), _FONT, 0.7, (255, 255, 255), 2,
+        cv2.putText(out, fit_text(text, out.shape[1] - 16, 0.7), (8, _CAPTION + 30), FONT, 0.7, (255, 255, 255), 2,
                     cv2.LINE_AA)
     elif differs:
         cv2.rectangle(out, (1, 1), (out.shape[1] - 2, out.shape[0] - 2), _DIFF_RGB, 3)
-        tw = cv2.getTextSize("first difference", _FONT, 0.6, 2)[0][0]
-        cv2.putText(out, "first difference", (out.shape[1] - tw - 10, 27), _FONT, 0.6, _DIFF_RGB, 2, cv2.LINE_AA)
+        tw = cv2.getTextSize("first difference", FONT, 0.6, 2)[0][0]
+        cv2.putText(out, "first difference", (out.shape[1] - tw - 10, 27), FONT, 0.6, _DIFF_RGB, 2, cv2.LINE_AA)
     return out
 
 
@@ -366,20 +365,12 @@ def _wrap(text: str, width: int, scale: float) -> list[str]:
     lines, line = [], ""
     for word in text.split():
         trial = f"{line} {word}".strip()
-        if line and cv2.getTextSize(trial, _FONT, scale, 1)[0][0] > width:
+        if line and cv2.getTextSize(trial, FONT, scale, 1)[0][0] > width:
             lines.append(line)
             line = word
         else:
             line = trial
     lines.append(line)
     if len(lines) > 2:
-        lines[1] = _fit(lines[1] + " " + " ".join(lines[2:]), width, scale)
+        lines[1] = fit_text(lines[1] + " " + " ".join(lines[2:]), width, scale)
     return lines
-
-
-def _fit(text: str, width: int, scale: float) -> str:
-    if cv2.getTextSize(text, _FONT, scale, 1)[0][0] <= width:
-        return text
-    while text and cv2.getTextSize(text + "...", _FONT, scale, 1)[0][0] > width:
-        text = text[:-1]
-    return text + "..."

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 from pathlib import Path
@@ -91,3 +92,52 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def write_frontier_file(folder: Path, houses=("Allensville", "Coffeen", "Hiteman"), choices: int = 12) -> Path:
+    """A small `language frontier-data` file: in every house a frontier whose window holds a sink lies
+    nearer the toilet than one that sees a couch (each episode closed by its "done" line)."""
+    from l3mvn.language.vocabulary import GOALS
+
+    rng = np.random.default_rng(0)
+    lines = []
+    for house in houses:
+        for k in range(choices):
+            frontiers = []
+            for objects, toilet in ((["sink"], 1.0), (["couch"], 5.0), (["vase", "couch"], 6.0)):
+                goal_m = {g: round(float(rng.uniform(1, 8)), 2) for g in GOALS}
+                goal_m["toilet"] = toilet + float(rng.uniform(0, 0.5))
+                frontiers.append({"cost": float(rng.uniform(1, 3)), "s_cu": float(rng.uniform()), "utility": 10.0,
+                                  "objects": {o: 1.0 for o in objects}, "goal_m": goal_m})
+            lines.append(json.dumps({"house": house, "episode": f"{house}/0/{k}", "seed": 0, "goal": "toilet",
+                                     "mapped": [], "frontiers": frontiers}))
+            lines.append(json.dumps({"done": f"{house}/0/{k}", "seed": 0, "choices": 1}))
+    path = folder / "frontiers.jsonl"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def first_frontier_choice(scene: SceneMap, policy: str = "l3mvn-zs"):
+    """The Decision of ``policy``'s first frontier choice on ``scene`` (toilet, 60x80 frames)."""
+    from l3mvn.config import Config
+    from l3mvn.runner import Runner
+    from l3mvn.types import Episode, Pose
+
+    session = Runner(Config().with_frame(60, 80)).session(scene, policy)
+    session.start(Episode(episode_id=0, scene=scene.name, floor=0, start=Pose(2.5, 2.0, 0.0), goal="toilet"))
+    while not session.done:
+        d = session.step().decision
+        if d is not None and d.goal_kind == "frontier" and d.frontiers:
+            return d
+    raise AssertionError(f"{policy} never chose a frontier")
+
+
+@pytest.fixture
+def strict_rerun():
+    """Rerun normally turns a bad log call into a warning; make it an error so the recorder counts it."""
+    import rerun as rr
+
+    before = rr.strict_mode()
+    rr.set_strict_mode(True)
+    yield
+    rr.set_strict_mode(before)

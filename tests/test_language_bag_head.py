@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import torch
 
+from conftest import write_frontier_file
 from l3mvn.cli import main
 from l3mvn.config import PolicyConfig
 from l3mvn.errors import L3MVNError
@@ -119,28 +120,13 @@ def test_room_bag_training_is_deterministic_for_a_seed_and_learns_the_rooms(tmp_
 
 
 def _frontier_file(tmp_path):
-    """Choices in a train, a validation and a test house: a frontier whose window holds a sink lies
-    nearer the toilet than one that sees a couch."""
+    """Choices in a train, a validation and a test house (the shared file's frontiers)."""
     houses = {}
     i = 0
     while len(houses) < 3:
         name, i = f"H{i}", i + 1
         houses.setdefault(house_split(name), name)
-    rng = np.random.default_rng(0)
-    lines = []
-    for house in houses.values():
-        for k in range(10):
-            frontiers = []
-            for objects, toilet in ((["sink"], 1.0), (["couch"], 5.0), (["vase", "couch"], 6.0)):
-                goal_m = {g: round(float(rng.uniform(1, 8)), 2) for g in GOALS}
-                goal_m["toilet"] = toilet + float(rng.uniform(0, 0.5))
-                frontiers.append({"cost": float(rng.uniform(1, 3)), "s_cu": float(rng.uniform()), "utility": 10.0,
-                                  "objects": {o: 1.0 for o in objects}, "goal_m": goal_m})
-            lines.append(json.dumps({"house": house, "episode": f"{house}/0/{k}", "seed": 0, "goal": "toilet",
-                                     "mapped": [], "frontiers": frontiers}))
-    path = tmp_path / "frontiers.jsonl"
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return write_frontier_file(tmp_path, houses=tuple(houses.values()), choices=10)
 
 
 def test_frontier_bag_training_is_deterministic_and_never_reads_the_test_house(tmp_path):

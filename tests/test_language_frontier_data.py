@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 
+from conftest import write_frontier_file
 from l3mvn.config import Config, FrontierConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.eval.frontier_data import label_frontiers, read_done, window_object_distances
@@ -106,7 +107,7 @@ def test_house_split_is_by_house_and_never_puts_one_house_on_two_sides(tmp_path)
     sides = {h: house_split(h) for h in houses}
     assert set(sides.values()) == {"train", "val", "test"}
     assert all(house_split(h) == sides[h] for h in houses)  # a pure function of the name
-    path = _write_data(tmp_path, houses=["Allensville", "Hiteman", "Merom", "Coffeen"])
+    path = write_frontier_file(tmp_path, houses=["Allensville", "Hiteman", "Merom", "Coffeen"])
     by_house = {}
     for c in load_choices(path):
         by_house.setdefault(c.house, set()).add(house_split(c.house))
@@ -114,29 +115,8 @@ def test_house_split_is_by_house_and_never_puts_one_house_on_two_sides(tmp_path)
     assert by_house["Hiteman"] == {"val"} and by_house["Merom"] == {"test"} and by_house["Coffeen"] == {"train"}
 
 
-def _write_data(tmp_path, houses=("Allensville", "Coffeen", "Hiteman"), choices=12):
-    """A small frontier file: in every house a frontier whose window holds a sink lies nearer the
-    toilet than one that sees a couch."""
-    rng = np.random.default_rng(0)
-    lines = []
-    for house in houses:
-        for k in range(choices):
-            frontiers = []
-            for objects, toilet in ((["sink"], 1.0), (["couch"], 5.0), (["vase", "couch"], 6.0)):
-                goal_m = {g: round(float(rng.uniform(1, 8)), 2) for g in GOALS}
-                goal_m["toilet"] = toilet + float(rng.uniform(0, 0.5))
-                frontiers.append({"cost": float(rng.uniform(1, 3)), "s_cu": float(rng.uniform()), "utility": 10.0,
-                                  "objects": {o: 1.0 for o in objects}, "goal_m": goal_m})
-            lines.append(json.dumps({"house": house, "episode": f"{house}/0/{k}", "seed": 0, "goal": "toilet",
-                                     "mapped": [], "frontiers": frontiers}))
-            lines.append(json.dumps({"done": f"{house}/0/{k}", "seed": 0, "choices": 1}))
-    path = tmp_path / "frontiers.jsonl"
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
 def test_training_is_deterministic_for_a_seed_and_learns_the_toilet_side(tmp_path):
-    data = _write_data(tmp_path)
+    data = write_frontier_file(tmp_path)
     one = train_frontier_head([data], out=tmp_path / "a.pt", epochs=30, seed=3)
     two = train_frontier_head([data], out=tmp_path / "b.pt", epochs=30, seed=3)
     a, b = torch.load(tmp_path / "a.pt", weights_only=True), torch.load(tmp_path / "b.pt", weights_only=True)

@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from conftest import first_frontier_choice
 from l3mvn.frontiers import Frontier, Fusion
 from l3mvn.language import GOALS
 from l3mvn.policies.language_policy import LanguageFrontierPolicy
@@ -102,18 +103,7 @@ def test_the_fusion_line_names_the_bound_the_branch_and_the_winner_against_the_r
 
 
 def test_the_agents_frontiers_carry_the_record_of_the_choice_that_scored_them(tiny_scene):
-    from l3mvn.config import Config
-    from l3mvn.runner import Runner
-    from l3mvn.types import Episode, Pose
-
-    session = Runner(Config().with_frame(60, 80)).session(tiny_scene, "l3mvn-zs")
-    session.start(Episode(episode_id=0, scene="Tiny", floor=0, start=Pose(2.5, 2.0, 0.0), goal="toilet"))
-    shown = None
-    while not session.done and shown is None:
-        d = session.step().decision
-        if d is not None and d.goal_kind == "frontier" and d.frontiers:
-            shown = d
-    assert shown is not None, "the agent never chose a frontier"
+    shown = first_frontier_choice(tiny_scene, "l3mvn-zs")
     fusion = shown.frontiers[0].fusion
     assert all(f.fusion is fusion for f in shown.frontiers)  # one record per choice
     assert fusion.ids == tuple(f.id for f in shown.frontiers)

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from conftest import first_frontier_choice
 from l3mvn.errors import L3MVNError
 from l3mvn.frontiers import Frontier
 from l3mvn.config import PolicyConfig
@@ -63,19 +64,7 @@ def test_unknown_selection_is_a_clear_error():
 
 
 def test_the_agent_shows_each_frontier_with_the_scores_the_language_policy_gave_it(tiny_scene):
-    from l3mvn.config import Config
-    from l3mvn.runner import Runner
-    from l3mvn.types import Episode, Pose
-
-    runner = Runner(Config().with_frame(60, 80))
-    session = runner.session(tiny_scene, "l3mvn-zs")
-    session.start(Episode(episode_id=0, scene="Tiny", floor=0, start=Pose(2.5, 2.0, 0.0), goal="toilet"))
-    shown = None
-    while not session.done and shown is None:
-        d = session.step().decision
-        if d is not None and d.goal_kind == "frontier" and d.frontiers:
-            shown = d
-    assert shown is not None, "the agent never chose a frontier"
+    shown = first_frontier_choice(tiny_scene, "l3mvn-zs")
     assert all(f.s_llm is not None and f.fused is not None and f.llm_scores for f in shown.frontiers)
     chosen = shown.frontiers[shown.chosen_frontier]
     assert chosen.reason and shown.reason.endswith(chosen.reason)

@@ -10,7 +10,6 @@ import time
 
 import numpy as np
 import pytest
-import rerun as rr
 from rerun.chunk import RrdReader
 
 from l3mvn.config import AgentConfig, Config, SimConfig
@@ -33,13 +32,7 @@ MAP = {"/map", "/map/semantic", "/map/trajectory", "/map/agent", "/map/goal", "/
        "/map/frontier_cells", "/metrics/frontiers", "/world/goal"}
 
 
-@pytest.fixture(autouse=True)
-def strict_rerun():
-    """Rerun normally turns a bad log call into a warning; make it an error so the recorder counts it."""
-    before = rr.strict_mode()
-    rr.set_strict_mode(True)
-    yield
-    rr.set_strict_mode(before)
+pytestmark = pytest.mark.usefixtures("strict_rerun")  # a bad log call fails the test (conftest)
 
 
 CONFIG = Config(sim=dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=MAX_STEPS))

@@ -5,7 +5,6 @@ import dataclasses
 import math
 
 import pytest
-import rerun as rr
 from rerun.chunk import RrdReader
 
 from l3mvn.config import AgentConfig, Config, SimConfig
@@ -20,12 +19,7 @@ CONFIG = Config(sim=dataclasses.replace(SimConfig().with_frame(60, 80), max_step
                 agent=AgentConfig(look_around_steps=2))
 
 
-@pytest.fixture(autouse=True)
-def strict_rerun():
-    before = rr.strict_mode()
-    rr.set_strict_mode(True)
-    yield
-    rr.set_strict_mode(before)
+pytestmark = pytest.mark.usefixtures("strict_rerun")  # a bad log call fails the test (conftest)
 
 
 def _by_step(path, entity, column) -> dict[int, list]:

@@ -26,9 +26,9 @@ from l3mvn.errors import L3MVNError, first_line
 from l3mvn.recording.catalogue import TIMELINE, find_recording, open_recording, recording_name_part
 from l3mvn.recording.layout import AGENT_RGB, GOAL_RGB, TARGET_RGB, VIEW_MARGIN, score_colors
 
-_FONT = cv2.FONT_HERSHEY_SIMPLEX
-_BG = (24, 24, 24)
-_TEXT = (235, 235, 235)
+FONT = cv2.FONT_HERSHEY_SIMPLEX  # pictures drawn from recordings (video and the dashboard's compare view)
+PANEL_BG = (24, 24, 24)
+TEXT_RGB = (235, 235, 235)
 _DIM = (160, 160, 160)
 _SUCCESS_RGB = (40, 170, 70)
 _FAILURE_RGB = (200, 45, 45)
@@ -381,7 +381,7 @@ def frames(ep: RecordedEpisode, options: VideoOptions, *, title_frames: int | No
     last = ep.steps[-1].step
     for s in ep.steps:
         frame = np.zeros((geo.height, geo.width, 3), np.uint8)
-        frame[:] = _BG
+        frame[:] = PANEL_BG
         frame[: geo.panel, : geo.camera_w] = _camera(s, geo)
         x0 = geo.camera_w + _GAP
         frame[: geo.panel, x0: x0 + geo.map_w] = _map_panel(ep, s, lut, (geo.map_w, geo.panel))
@@ -466,7 +466,7 @@ def _map_panel(ep: RecordedEpisode, s: _Step, lut: np.ndarray, size: tuple[int, 
 def _place_label(img: np.ndarray, text: str, at: tuple[int, int], placed: list, rgb) -> None:
     """Put ``text`` beside the point at the first spot (right, left, above, below, further out) that
     overlaps no label or marker already placed: labels never cover each other."""
-    (tw, th), base = cv2.getTextSize(text, _FONT, 0.45, 1)
+    (tw, th), base = cv2.getTextSize(text, FONT, 0.45, 1)
     x, y = at
     for dx, dy in ((8, 4), (-tw - 8, 4), (-tw // 2, -10), (-tw // 2, th + 12), (8, -14), (8, th + 14),
                    (-tw - 8, -14), (-tw - 8, th + 14)):
@@ -478,11 +478,11 @@ def _place_label(img: np.ndarray, text: str, at: tuple[int, int], placed: list, 
 
 
 def _label(img: np.ndarray, text: str, at: tuple[int, int], rgb, scale: float = 0.45) -> None:
-    (tw, th), base = cv2.getTextSize(text, _FONT, scale, 1)
+    (tw, th), base = cv2.getTextSize(text, FONT, scale, 1)
     x, y = int(at[0]), int(at[1])
     cv2.rectangle(img, (x - 2, y - th - 2), (x + tw + 2, y + base), (20, 20, 20), -1)
     cv2.rectangle(img, (x - 2, y - th - 2), (x + tw + 2, y + base), tuple(int(v) for v in rgb), 1)
-    cv2.putText(img, text, (x, y), _FONT, scale, (255, 255, 255), 1, cv2.LINE_AA)
+    cv2.putText(img, text, (x, y), FONT, scale, (255, 255, 255), 1, cv2.LINE_AA)
 
 
 def _colour_bar(img: np.ndarray) -> None:
@@ -493,25 +493,25 @@ def _colour_bar(img: np.ndarray) -> None:
     y0, x0 = h - 26, 34
     cv2.rectangle(img, (4, y0 - 18), (x0 + w + 26, h - 4), (20, 20, 20), -1)
     img[y0: y0 + 10, x0: x0 + w] = bar[None]
-    cv2.putText(img, "0", (x0 - 14, y0 + 10), _FONT, 0.4, _TEXT, 1, cv2.LINE_AA)
-    cv2.putText(img, "1", (x0 + w + 6, y0 + 10), _FONT, 0.4, _TEXT, 1, cv2.LINE_AA)
-    cv2.putText(img, "frontier score", (x0, y0 - 5), _FONT, 0.4, _TEXT, 1, cv2.LINE_AA)
+    cv2.putText(img, "0", (x0 - 14, y0 + 10), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
+    cv2.putText(img, "1", (x0 + w + 6, y0 + 10), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
+    cv2.putText(img, "frontier score", (x0, y0 - 5), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
 
 
 def _band(frame: np.ndarray, geo: _Geometry, ep: RecordedEpisode, s: _Step, last: int) -> None:
     scale = geo.band / 115
     y = geo.panel + int(geo.band * 0.38)
     head = f"step {s.step}/{last}   find: {s.goal}   {ep.policy} on {ep.scene} #{ep.episode_id}"
-    cv2.putText(frame, head, (10, y), _FONT, scale, _TEXT, 1, cv2.LINE_AA)
-    cv2.putText(frame, _fit(s.decision, geo.width - 20, scale * 0.85), (10, y + int(geo.band * 0.4)), _FONT,
+    cv2.putText(frame, head, (10, y), FONT, scale, TEXT_RGB, 1, cv2.LINE_AA)
+    cv2.putText(frame, fit_text(s.decision, geo.width - 20, scale * 0.85), (10, y + int(geo.band * 0.4)), FONT,
                 scale * 0.85, _DIM, 1, cv2.LINE_AA)
 
 
-def _fit(text: str, width: int, scale: float) -> str:
+def fit_text(text: str, width: int, scale: float) -> str:
     """``text`` cut (with an ellipsis) to ``width`` pixels."""
-    if cv2.getTextSize(text, _FONT, scale, 1)[0][0] <= width:
+    if cv2.getTextSize(text, FONT, scale, 1)[0][0] <= width:
         return text
-    while text and cv2.getTextSize(text + "...", _FONT, scale, 1)[0][0] > width:
+    while text and cv2.getTextSize(text + "...", FONT, scale, 1)[0][0] > width:
         text = text[:-1]
     return text + "..."
 
@@ -519,14 +519,14 @@ def _fit(text: str, width: int, scale: float) -> str:
 def title_card(ep: RecordedEpisode, geo: _Geometry) -> np.ndarray:
     """The outcome in a coloured banner (green success, red failure), then the episode and metrics."""
     card = np.zeros((geo.height, geo.width, 3), np.uint8)
-    card[:] = _BG
+    card[:] = PANEL_BG
     outcome = ep.outcome
     banner = geo.height // 4
     card[:banner] = _SUCCESS_RGB if outcome == "success" else (_FAILURE_RGB if ep.result else (110, 110, 110))
     title = {"success": "SUCCESS", "unfinished": "NO RESULT (recording cut short)"}.get(
         outcome, f"FAILURE: {outcome.removeprefix('fail_').replace('_', ' ')}")
     scale = geo.height / 360
-    cv2.putText(card, _fit(title, geo.width - 40, scale * 1.1), (20, banner // 2 + int(12 * scale)), _FONT,
+    cv2.putText(card, fit_text(title, geo.width - 40, scale * 1.1), (20, banner // 2 + int(12 * scale)), FONT,
                 scale * 1.1, (255, 255, 255), 2, cv2.LINE_AA)
     r = ep.result
     goal = ep.steps[0].goal if ep.steps else "?"
@@ -536,8 +536,8 @@ def title_card(ep: RecordedEpisode, geo: _Geometry) -> np.ndarray:
         lines.append(f"path {_num(r.get('path_length_m'))} m, shortest {_num(r.get('shortest_path_m'))} m")
     lines.append("frames: L3MVN Studio's CPU renderer (flat-shaded)")
     for i, line in enumerate(lines):
-        colour = _DIM if i == len(lines) - 1 else _TEXT
-        cv2.putText(card, _fit(line, geo.width - 40, scale * 0.6), (20, banner + int((40 + 34 * i) * scale)), _FONT,
+        colour = _DIM if i == len(lines) - 1 else TEXT_RGB
+        cv2.putText(card, fit_text(line, geo.width - 40, scale * 0.6), (20, banner + int((40 + 34 * i) * scale)), FONT,
                     scale * 0.6, colour, 1, cv2.LINE_AA)
     return card
 
