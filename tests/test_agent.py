@@ -402,3 +402,38 @@ def test_a_kept_frontier_names_why_it_was_chosen_once_not_once_per_keep():
         assert sel.frontier == 0
         goals.reason = sel.reason
     assert goals.reason == "kept frontier 0 (commitment): nearest frontier (1.0 m)"
+
+
+def test_a_frontier_too_near_for_a_new_list_is_looked_beyond_before_the_timer_chooses_again():
+    """Klickitat/0/0 (nearest frontier): the re-selection timer fired on the step the agent came
+    within 0.5 m of its frontier, before the plan could read it as reached. The new list left that
+    frontier out (nearer than ``min_distance_m``), the agent walked 6 m to another, found the first
+    one nearest again and went back: 400 steps back and forth."""
+    from l3mvn.agent.exploration import ExplorationGoals
+    from l3mvn.events import GoalKind
+    from l3mvn.planning import LocalPlanner
+
+    config = Config()
+    n = 200
+    explored = np.zeros((n, n), bool)
+    explored[58:142, 38:180] = True  # a walled room, open to the east (unknown beyond x = 9 m) ...
+    obstacle = np.zeros((n, n), bool)
+    obstacle[58:61, 38:180] = obstacle[139:142, 38:180] = obstacle[58:142, 38:41] = True
+    obstacle[58:61, 106:118] = False  # ... with a door to the north
+
+    def at(agent_cell):
+        return SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros_like(explored),
+                           categories=np.zeros((1, n, n), bool), category_names=("toilet",), looked=explored,
+                           resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=agent_cell, agent_heading=0.0,
+                           local_cells=n, footprint_radius_cells=3)
+
+    goals = ExplorationGoals(NearestFrontier(), config, LocalPlanner(config.planner, config.map.resolution_m))
+    goals.reselect(at((100, 80)), "toilet", np.random.default_rng(0))
+    assert goals.kind == GoalKind.FRONTIER and goals.cell[0] < 62  # the door, 2.6 m away
+    door = goals.cell
+    for _ in range(config.agent.replan_every):
+        goals.tick()
+    assert goals.due(at((100, 80)))  # still on the way: the timer re-selects as usual
+    near = at((door[0] + 7, door[1]))  # 0.35 m from the door
+    assert all(f.center[0] > 62 for f in goals._extract(near))  # why it matters: the door is gone
+    assert not goals.due(near)

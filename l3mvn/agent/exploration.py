@@ -61,14 +61,23 @@ class ExplorationGoals:
         if self.cell == self.pressing and reached:
             self.stood.add(self.cell)
 
-    def due(self) -> bool:
+    def due(self, sem_map: SemanticMap) -> bool:
         """Every ``replan_every`` steps, at once when forced (inf), never while a policy that keeps
-        its goal (random sample) still pursues one or while walking up to a frontier."""
+        its goal (random sample) still pursues one, while walking up to a frontier, or once nearer
+        its frontier than ``min_distance_m``: a new list would leave that frontier out, unexplored,
+        and it came back once the agent had walked away (Klickitat/0/0, nearest frontier: 400 steps
+        back and forth between two frontiers). This step's plan reads it as reached instead, and
+        the agent looks beyond it before choosing again."""
         if self.cell is None or self.since_select == math.inf:
             return True
         keeps = self.kind == GoalKind.RANDOM and getattr(self.global_policy, "keeps_goal", False)
         keeps = keeps or (self.kind == GoalKind.FRONTIER and self.cell == self.pressing)  # nearly there
+        keeps = keeps or (self.kind == GoalKind.FRONTIER and self._too_near_to_list(sem_map))
         return self.since_select >= self.cfg.replan_every and not keeps
+
+    def _too_near_to_list(self, sem_map: SemanticMap) -> bool:
+        (r, c), (gr, gc) = sem_map.agent_cell, self.cell
+        return math.hypot(r - gr, c - gc) * sem_map.resolution_m < self.config.frontiers.min_distance_m
 
     def reselect(self, sem_map: SemanticMap, goal: str, rng: np.random.Generator) -> tuple[float, float]:
         """Extract frontiers and let the global policy choose; returns (frontier ms, policy ms).

@@ -132,7 +132,7 @@ class MapAgent:
             goal, kind = search.glimpse, GoalKind.GLIMPSE
             reason = f"{self.goal} seen beyond the depth range: walking towards it"
         else:
-            if explore.due():
+            if explore.due(sem_map):
                 frontiers_ms, policy_ms = explore.reselect(sem_map, self.goal, self.rng)
             goal, kind, reason = explore.cell, explore.kind, explore.reason
         t["select"] = time.perf_counter()
