@@ -25,12 +25,13 @@ from app.map_image import agent_map_view, ground_truth_view
 from app.model_weights import scorer_problems
 from app.state import Cell, Frames, Metrics, Notice, Snapshot
 from l3mvn.config import Config, config_hash
+from l3mvn.config.policy import DEFAULT_HEAD, HEAD_KINDS
 from l3mvn.datasets import EpisodeSet
 from l3mvn.errors import L3MVNError
 from l3mvn.events import EventBus, StepEvent
 from l3mvn.agent.teleop import TeleopAgent
 from l3mvn.registry import (
-    DIRECT_POLICIES, LANGUAGE_POLICIES, POLICY_NAMES, TELEOP, check_policy,
+    ALIASES, DIRECT_POLICIES, LANGUAGE_POLICIES, POLICY_NAMES, TELEOP, check_policy,
 )
 from l3mvn.scenes.scene import GOAL_CATEGORIES
 from l3mvn.runner import Runner
@@ -42,6 +43,8 @@ log = logging.getLogger(__name__)
 
 MIN_SPEED, MAX_SPEED = 0.5, 60.0
 DEFAULT_SCORER = "policy default"  # the scorer choice that keeps the policy's own
+DEFAULT_HEAD_CHOICE = f"default ({DEFAULT_HEAD})"  # the head choice that leaves policy.head unset
+HEADED_SCORER = "feedforward"  # the one scorer that reads a head
 MAX_QUEUED_STEPS = 5
 FRAME_WIDTH = 320  # camera frames are shown at most this wide
 
@@ -64,6 +67,7 @@ class DashboardController:
         for ep in episodes.episodes:
             self._by_scene.setdefault(f"{ep.scene}/{ep.floor}", []).append(ep)
         self._runner = Runner(self.cfg, seed=seed)
+        self._swapped_live = False  # a scorer swapped into a warm policy mid-episode (see _runner_fits)
         self._session: EpisodeSession | None = None
         self._trajectory: list[Pose] = []
         self._manual: Cell | None = None
@@ -101,6 +105,16 @@ class DashboardController:
         if scene_key not in self._by_scene:
             raise L3MVNError(f"unknown scene {scene_key!r}; valid scenes: {', '.join(self._by_scene)}")
         return self._by_scene[scene_key]
+
+    @staticmethod
+    def head_names() -> tuple[str, ...]:
+        """The Head dropdown's choices: the default first, then every feed-forward head kind."""
+        return (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS
+
+    @property
+    def head(self) -> str:
+        """The Head choice sessions are built with from the next Reset (``policy.head`` of ``cfg``)."""
+        return self.cfg.policy.head or DEFAULT_HEAD_CHOICE
 
     @staticmethod
     def scorer_names() -> tuple[str, ...]:
@@ -230,6 +244,22 @@ class DashboardController:
             return
         self._submit("scorer", self._apply_scorer, client_id, busy=f"loading the language scorer {name!r}")
 
+    def set_head(self, name: str, *, client_id: int | None = None) -> None:
+        """Set ``policy.head`` for sessions from the next Reset; only feed-forward scoring reads it."""
+        if name not in self.head_names():
+            raise L3MVNError(f"unknown head {name!r}; valid heads: {', '.join(self.head_names())}")
+        head = None if name == DEFAULT_HEAD_CHOICE else name
+        self.cfg = self.cfg.replace(policy=replace(self.cfg.policy, head=head))
+        scorer = self._scorer_of(self.policy_name)
+        if scorer == HEADED_SCORER:
+            self._notify(f"head {name!r} takes effect on the next Reset", client_id=client_id)
+        else:
+            scoring = f"scores with {scorer!r}" if scorer else "uses no language scorer"
+            self._notify(f"head {name!r} is kept but ignored by policy {self.policy_name!r}, which {scoring}: only "
+                         f"feed-forward scoring uses a head (policies {', '.join(self.headed_policies())}, "
+                         f"or Scorer {HEADED_SCORER})", client_id=client_id)
+        self._publish()  # every tab's Head dropdown follows
+
     def set_record(self, on: bool, *, client_id: int | None = None) -> None:
         self.record = on
         state = f"on: episodes from the next Reset are saved under {self.record_dir}/" if on else "off"
@@ -350,20 +380,51 @@ class DashboardController:
 
     def _do_reset(self, episode: Episode) -> None:
         scene = self.episodes.scene_of(episode)
+        cfg = self._session_config(self.policy_name)
+        self._stop_recorder()
+        if not self._runner_fits(cfg, self.policy_name):
+            self._runner.close()
+            self._runner, self._swapped_live = Runner(cfg, seed=self.seed), False
         if self.policy_name in LANGUAGE_POLICIES and self.policy_name not in self._runner.floor(scene).policies:
             self._set_busy(f"loading the language model of {self.policy_name} (a few seconds, once)")
         # The same hash ``l3mvn eval`` writes for these settings, so dashboard runs can be matched.
-        scorer = self.scorer if self.policy_name in LANGUAGE_POLICIES else None
-        chash = config_hash(self.cfg.replace(policy=replace(self.cfg.policy, scorer=scorer)),
-                            extra={"policy": self.policy_name, "seed": self.seed})
-        self._stop_recorder()
+        chash = config_hash(cfg, extra={"policy": self.policy_name, "seed": self.seed})
         self._session = self._runner.session(scene, self.policy_name, self.bus, config_hash=chash)
         self._manual, self._segment_note = None, ""
-        self._apply_scorer()
         if self.record:
             self._start_recorder(episode)
         self._trajectory = []
         self._session.start(episode)
+
+    def _scorer_of(self, policy: str) -> str | None:
+        """The scorer a session of ``policy`` built now scores with (None: not a language policy)."""
+        resolved = ALIASES.get(policy, policy)
+        if resolved not in LANGUAGE_POLICIES:
+            return None
+        return self.scorer or self.cfg.policy.scorer or LANGUAGE_POLICIES[resolved][0]
+
+    @staticmethod
+    def headed_policies() -> tuple[str, ...]:
+        return tuple(name for name, (scorer, *_) in LANGUAGE_POLICIES.items() if scorer == HEADED_SCORER)
+
+    def _session_config(self, policy: str) -> Config:
+        """The config a session of ``policy`` is built and hashed with: the Scorer choice for a language
+        policy, and the Head only where that scorer reads one (a head elsewhere is refused or ignored)."""
+        scorer = self._scorer_of(policy)
+        p = self.cfg.policy
+        return self.cfg.replace(policy=replace(p, scorer=scorer if self.scorer else p.scorer,
+                                               head=p.head if scorer == HEADED_SCORER else None))
+
+    def _runner_fits(self, cfg: Config, policy: str) -> bool:
+        """Whether the warm runner builds ``policy`` as ``cfg`` says: its policies are cached by name, so
+        another Scorer or Head, or a scorer swapped live into a warm policy, needs a new runner; a policy
+        without a language scorer never reads the head."""
+        if self._swapped_live:
+            return False
+        have = self._runner.config
+        if self._scorer_of(policy) is None:
+            have = have.replace(policy=replace(have.policy, head=cfg.policy.head))
+        return have == cfg
 
     def _set_busy(self, text: str) -> None:
         """Say more about the controls-holding job in progress (what takes long inside it)."""
@@ -411,6 +472,7 @@ class DashboardController:
             return
         try:
             session.set_scorer(self.scorer)
+            self._swapped_live = True
         except L3MVNError as exc:
             self._notify(str(exc), level="warning", sticky=True, title="Scorer not applied")
 

@@ -171,6 +171,10 @@ class DashboardView:
             self.scorer = gui.add_dropdown("Scorer", (DEFAULT_SCORER,) + ctl.scorer_names(),
                                            hint="language policies only; 'policy default' restores theirs on Reset")
             self.scorer_note = gui.add_markdown(_unavailable_markdown(ctl.unavailable_scorers))
+            self.head = gui.add_dropdown("Head", ctl.head_names(), initial_value=ctl.head,
+                                         hint=f"feed-forward scoring only ({', '.join(ctl.headed_policies())} "
+                                              "or Scorer feedforward); other scorers ignore it; takes effect on "
+                                              "the next Reset")
             self.controls = gui.add_button_group("Controls", BUTTONS_PAUSED)
             self.speed = gui.add_slider("Steps / s", min=MIN_SPEED, max=MAX_SPEED, step=0.5,
                                         initial_value=ctl.snapshot.steps_per_second)
@@ -208,7 +212,7 @@ class DashboardView:
             self.legend = gui.add_html(_legend_html(legend(GOAL_CATEGORIES), target=first.goal))
         self._listed_episodes = 0
         # Held while the worker resets or loads a model: a change then would apply to a half-built session.
-        self._held = (self.scene, self.episode, self.target, self.policy, self.scorer, self.record)
+        self._held = (self.scene, self.episode, self.target, self.policy, self.scorer, self.head, self.record)
         self._wire_gui()
 
     def _wire_gui(self) -> None:
@@ -245,6 +249,13 @@ class DashboardView:
                 ctl.set_scorer(self.scorer.value, client_id=event.client_id)
             finally:
                 self.scorer.value = ctl.scorer or DEFAULT_SCORER  # what the controller uses, refused or not
+
+        @self._on(self.head)
+        def _(event: viser.GuiEvent) -> None:
+            try:
+                ctl.set_head(self.head.value, client_id=event.client_id)
+            finally:
+                self.head.value = ctl.head  # what the next Reset builds with, refused or not
 
         @self._on(self.record)
         def _(event: viser.GuiEvent) -> None:
@@ -496,6 +507,8 @@ class DashboardView:
             self.drive_folder.visible = snap.policy == TELEOP
             if self.policy.value != self.ctl.policy_name:  # chosen elsewhere (another tab, the CLI's --policy)
                 self.policy.value = self.ctl.policy_name
+            if self.head.value != self.ctl.head:  # chosen in another tab
+                self.head.value = self.ctl.head
             if self.speed.value != snap.steps_per_second:  # a clamped or scripted speed
                 self.speed.value = snap.steps_per_second
             self._show_busy(snap.busy)

@@ -17,8 +17,8 @@ from l3mvn.errors import L3MVNError
 from l3mvn.events import EventBus
 from l3mvn.recording import Recorder, read_recording
 from l3mvn.recording.video import (
-    VideoOptions, add_export_arguments, frames, export_result_video, export_video, read_episode, result_video_name,
-    run_export,
+    PANEL_BG, VideoOptions, add_export_arguments, frames, export_result_video, export_video, read_episode,
+    result_video_name, run_export,
 )
 from l3mvn.runner import Runner
 from l3mvn.scenes.procedural import generate_house
@@ -32,9 +32,11 @@ def house():
     return generate_house(3)
 
 
-def _record(folder, scene, policy):
+def _record(folder, scene, policy, events=None):
     episode = generate_episodes(scene, 1, seed=3, goals=("toilet",))[0]
     bus = EventBus()
+    if events is not None:
+        bus.subscribe(events.append)
     recorder = Recorder.for_episode(folder, "procedural", episode, policy).attach(bus)
     result = Runner(CONFIG).run(scene, episode, policy, bus)
     return recorder.path, result
@@ -98,6 +100,55 @@ def test_each_step_frame_shows_that_steps_map_and_camera(recorded, tmp_path):
     assert max(np.abs(a.astype(int) - b).mean() for a, b in zip(decoded, drawn)) < 6  # what was drawn, per step
     first, last = drawn[0][:240, 326:].astype(int), drawn[-1][:240, 326:].astype(int)
     assert np.abs(last - first).mean() > 5  # the map panel shows the map of its own step
+
+
+@pytest.fixture(scope="module")
+def language(house, tmp_path_factory):
+    """The same episode under l3mvn-zs (room-type scorer: offline, no model), and the events it published."""
+    events = []
+    path, _ = _record(tmp_path_factory.mktemp("language"), house, "l3mvn-zs", events)
+    return path, events
+
+
+def test_a_language_episodes_frames_print_the_fusion_line_in_force_at_each_step(language, tmp_path):
+    path, events = language
+    ep = read_episode(path)
+    line, expected = "", []
+    for ev in events:  # log/fusion is written at each new choice and holds until the next
+        if ev.decision is not None and ev.decision.frontiers and ev.decision.frontiers[0].fusion is not None:
+            line = ev.decision.frontiers[0].fusion.describe()
+        expected.append(line)
+    assert [s.fusion for s in ep.steps] == expected
+    assert ep.has_fusion and "" in expected, "the episode should start before its first choice"
+    assert any(s.fusion.startswith("bound B = [0.15, 0.30]; max S_LLM") for s in ep.steps)
+
+    options = VideoOptions(height=240, title_s=0)
+    bare = dataclasses.replace(ep, steps=[dataclasses.replace(s, fusion="") for s in ep.steps])
+    drawn, without = list(frames(ep, options, title_frames=0)), list(frames(bare, options, title_frames=0))
+    h = without[0].shape[0]
+    assert h == 240 + 56  # the band without a fusion row, as for a policy without language
+    rows = {}
+    for s, with_line, no_line in zip(ep.steps, drawn, without):
+        assert with_line.shape[0] > h and np.array_equal(with_line[:h], no_line)  # the rest of the frame as before
+        row = with_line[h:]
+        ink = np.flatnonzero((row != PANEL_BG).any(axis=(0, 2)))
+        assert bool(ink.size) == bool(s.fusion)  # a row of text only where the step has a fusion line
+        if ink.size:
+            assert ink[-1] < with_line.shape[1] - 5  # fitted to the frame (fit_text), never cut at the edge
+        rows.setdefault(s.fusion, []).append(row)
+    for text, same in rows.items():
+        assert all(np.array_equal(same[0], r) for r in same[1:]), f"one line, one picture: {text!r}"
+    lines = [r[0] for t, r in rows.items() if t]
+    assert len(lines) < 2 or any(not np.array_equal(lines[0], r) for r in lines[1:])  # the text, not a fixed mark
+
+    video = export_video(path, tmp_path / "zs.mp4", options)
+    assert video.height == drawn[0].shape[0] and len(_decode(video.path)) == 1 + len(ep.steps)
+
+
+def test_a_recording_without_language_has_no_fusion_row(recorded):
+    ep = read_episode(recorded[0])
+    assert not ep.has_fusion and all(s.fusion == "" for s in ep.steps)
+    assert next(frames(ep, VideoOptions(height=240), title_frames=0)).shape[0] == 240 + 56
 
 
 def test_a_gif_is_written_beside_the_mp4(recorded, tmp_path):

@@ -2,7 +2,8 @@
 
 One frame per recorded step: the RGB frame beside the top-down map (cropped to what the episode
 mapped, the target category boxed, frontiers coloured by score, the best three and the chosen one
-labelled, a score colour bar), and under them the step, the target and the decision. A title card
+labelled, a score colour bar), and under them the step, the target and the decision (and, for a
+language policy, the fusion rule's line behind the current choice, as ``log/fusion`` holds it). A title card
 with the outcome (success, or the failure cause, SPL, DTG) opens the video. Everything comes from
 the recording (any ``.rrd`` the recorder wrote can be exported, nothing else is needed), through
 rerun's own reader: each entity's value at a step is its latest value logged at or before it.
@@ -30,6 +31,7 @@ FONT = cv2.FONT_HERSHEY_SIMPLEX  # pictures drawn from recordings (video and the
 PANEL_BG = (24, 24, 24)
 TEXT_RGB = (235, 235, 235)
 _DIM = (160, 160, 160)
+_FUSION_RGB = (150, 195, 240)
 _SUCCESS_RGB = (40, 170, 70)
 _FAILURE_RGB = (200, 45, 45)
 _GAP = 6  # pixels between the camera and the map panel
@@ -39,7 +41,8 @@ _UNLABELLED = ""
 
 @dataclass(frozen=True)
 class VideoOptions:
-    """How a video is drawn: ``height`` of the camera and map panels (the text band adds a quarter),
+    """How a video is drawn: ``height`` of the camera and map panels (the text band adds a sixth, and
+    two fifths of that again for a recording with a fusion line),
     ``fps`` steps per second, ``title_s`` seconds of title card."""
 
     fps: float = 4.0
@@ -91,6 +94,7 @@ class _Step:
     rgb_png: bytes
     goal: str
     decision: str
+    fusion: str  # the fusion rule's line in force at this step ("" before a language policy's first choice)
     map_ids: tuple[int, int, np.ndarray] | None  # (row, col) offset and the mapped window of the ids
     frontiers: _Marks | None
     frontier_cells: _Marks | None
@@ -116,6 +120,11 @@ class RecordedEpisode:
     box: tuple[int, int, int, int] = (0, 1, 0, 1)  # square map crop: rows r0..r1, cols c0..c1 (exclusive)
 
     @property
+    def has_fusion(self) -> bool:
+        """Whether any step has a fusion line (a language policy's recording): the band gets a row for it."""
+        return any(s.fusion for s in self.steps)
+
+    @property
     def outcome(self) -> str:
         """``success``, ``fail_<cause>`` or ``unfinished`` (no result: the recording was cut)."""
         if not self.result:
@@ -137,6 +146,7 @@ _WANTED = {
     "/map/agent": ("Points2D:positions", "Arrows2D:vectors"),
     "/map/goal": ("Points2D:positions", "Points2D:colors", "Points2D:labels"),
     "/log/decisions": ("TextLog:text",),
+    "/log/fusion": ("TextLog:text",),
     "/log/episode": ("TextLog:text",),
     "/episode": ("TextDocument:text",),
 }
@@ -237,9 +247,11 @@ def _assemble(path: Path, events: dict) -> RecordedEpisode:
         agent, goal_mark = latest["/map/agent"].at(step), latest["/map/goal"].at(step)
         strips = latest["/map/trajectory"].at(step)
         target = latest["/camera/rgb/target"].at(step)
+        fusion = latest["/log/fusion"].at(step)  # logged at each new choice, so in force until the next
         ep.steps.append(_Step(
             step=step, rgb_png=_png(latest["/camera/rgb"].at(step)), goal=goal,
-            decision=decisions.get(step, "reset: the episode starts" if step == 0 else ""), map_ids=ids,
+            decision=decisions.get(step, "reset: the episode starts" if step == 0 else ""),
+            fusion="" if fusion is None else fusion["TextLog:text"][0], map_ids=ids,
             frontiers=_marks(frontiers), frontier_cells=_marks(cells),
             trajectory=None if strips is None else strips["LineStrips2D:strips"],
             agent=None if agent is None else (agent["Points2D:positions"][0], agent["Arrows2D:vectors"][0]),
@@ -356,18 +368,21 @@ class _Geometry:
     camera_w: int
     map_w: int
     band: int
+    line: int  # the band's text unit: the band's height without the fusion row
 
     @classmethod
     def of(cls, ep: RecordedEpisode, options: VideoOptions) -> _Geometry:
         h0, w0 = cv2.imdecode(np.frombuffer(ep.steps[0].rgb_png, np.uint8), cv2.IMREAD_UNCHANGED).shape[:2]
         panel = options.height
         camera_w = round(panel * w0 / h0)
-        band = max(56, panel // 6)
+        line = max(56, panel // 6)
         r0, r1, c0, c1 = ep.box
         map_w = round(panel * (c1 - c0) / (r1 - r0))
         map_w += (camera_w + _GAP + map_w) % 2  # codecs want even sizes
-        band += (panel + band) % 2
-        return cls(camera_w + _GAP + map_w, panel + band, panel, camera_w, map_w, band)
+        line += (panel + line) % 2
+        fusion_row = 2 * (round(line * 0.4) // 2) if ep.has_fusion else 0  # even: the height stays even
+        band = line + fusion_row
+        return cls(camera_w + _GAP + map_w, panel + band, panel, camera_w, map_w, band, line)
 
 
 def frames(ep: RecordedEpisode, options: VideoOptions, *, title_frames: int | None = None) -> Iterator[np.ndarray]:
@@ -499,12 +514,17 @@ def _colour_bar(img: np.ndarray) -> None:
 
 
 def _band(frame: np.ndarray, geo: _Geometry, ep: RecordedEpisode, s: _Step, last: int) -> None:
-    scale = geo.band / 115
-    y = geo.panel + int(geo.band * 0.38)
+    """The step, target and episode; the decision; and the fusion line where the step has one."""
+    scale = geo.line / 115
+    y = geo.panel + int(geo.line * 0.38)
     head = f"step {s.step}/{last}   find: {s.goal}   {ep.policy} on {ep.scene} #{ep.episode_id}"
     cv2.putText(frame, head, (10, y), FONT, scale, TEXT_RGB, 1, cv2.LINE_AA)
-    cv2.putText(frame, fit_text(s.decision, geo.width - 20, scale * 0.85), (10, y + int(geo.band * 0.4)), FONT,
+    cv2.putText(frame, fit_text(s.decision, geo.width - 20, scale * 0.85), (10, y + int(geo.line * 0.4)), FONT,
                 scale * 0.85, _DIM, 1, cv2.LINE_AA)
+    if s.fusion:  # in its own row under the others: their pixels stay as a recording without one draws them
+        baseline = geo.panel + geo.line + int((geo.band - geo.line) * 0.7)
+        cv2.putText(frame, fit_text(s.fusion, geo.width - 20, scale * 0.85), (10, baseline), FONT, scale * 0.85,
+                    _FUSION_RGB, 1, cv2.LINE_AA)
 
 
 def fit_text(text: str, width: int, scale: float) -> str:

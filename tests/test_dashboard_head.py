@@ -1,0 +1,110 @@
+"""The dashboard's Head dropdown (issue 15 leftover): it sets ``policy.head`` of the config the worker
+builds sessions from, takes effect on the next Reset, and is ignored (with a notice that says so) by
+policies that do not score with the feed-forward scorer. The bag heads need no sentence encoder, so
+these tests build real feed-forward scorers offline."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from conftest import free_port
+from app.server import start_dashboard
+from app.session_worker import DEFAULT_HEAD_CHOICE, DashboardController
+from l3mvn.config import Config, PolicyConfig, SimConfig, config_hash
+from l3mvn.config.policy import HEAD_KINDS
+from l3mvn.datasets import load_episode_set
+from l3mvn.errors import L3MVNError
+
+SMALL = Config(sim=SimConfig().with_frame(60, 80))
+BAG = SMALL.replace(policy=PolicyConfig(head="frontiers-bag"))
+
+
+def _controller(cfg: Config, policy: str) -> DashboardController:
+    c = DashboardController(load_episode_set(None, "val", houses=1, episodes_per_house=1, cfg=cfg), cfg,
+                            policy=policy)
+    c.notices = []
+    c.on_notice(c.notices.append)
+    return c
+
+
+@pytest.fixture
+def ctl():
+    c = _controller(BAG, "l3mvn-ff")
+    yield c
+    c.close()
+
+
+def _reset(c: DashboardController):
+    scene = c.scene_keys[0]
+    c.reset(scene, c.episodes_of(scene)[0].episode_id)
+    assert c.wait_idle(60.0)
+    assert c.snapshot.error is None, c.snapshot.error
+    return c.session
+
+
+def _hash(cfg: Config, policy: str) -> str:
+    return config_hash(cfg, extra={"policy": policy, "seed": 0})
+
+
+def _with_head(head: str | None) -> Config:
+    return SMALL.replace(policy=dataclasses.replace(SMALL.policy, head=head))
+
+
+def test_the_head_starts_on_the_config_and_a_pick_is_what_the_next_reset_scores_with(ctl):
+    assert ctl.head == "frontiers-bag" and ctl.head_names() == (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS
+    first = _reset(ctl)
+    assert first.policy.global_policy.scorer.kind == "frontiers-bag"
+    assert first.config_hash == _hash(_with_head("frontiers-bag"), "l3mvn-ff")
+
+    ctl.set_head("rooms-bag")
+    assert ctl.cfg.policy.head == "rooms-bag" and ctl.head == "rooms-bag"
+    assert ctl.notices[-1].text == "head 'rooms-bag' takes effect on the next Reset"
+    assert ctl.session.policy.global_policy.scorer.kind == "frontiers-bag"  # the running episode keeps its own
+
+    second = _reset(ctl)
+    assert second.policy.global_policy.scorer.kind == "rooms-bag"
+    assert second.config_hash == _hash(_with_head("rooms-bag"), "l3mvn-ff") != first.config_hash
+
+
+def test_an_unknown_head_is_refused_with_the_valid_ones_and_changes_nothing(ctl):
+    with pytest.raises(L3MVNError, match=r"^unknown head 'bogus'; valid heads: default \(rooms\), frontiers, rooms, "
+                                         r"frontiers-bag, rooms-bag$"):
+        ctl.set_head("bogus")
+    assert ctl.head == "frontiers-bag" and not ctl.notices
+
+
+def test_the_head_survives_a_policy_change_and_policies_that_ignore_it_say_so_and_still_run(ctl):
+    ctl.set_head("rooms-bag")
+    ctl.set_policy("l3mvn-zs")
+    ctl.set_head("rooms-bag")  # picked again under a policy that does not read it
+    assert "ignored by policy 'l3mvn-zs', which scores with 'roomtype'" in ctl.notices[-1].text
+    assert "only feed-forward scoring uses a head (policies l3mvn-ff, near+llm" in ctl.notices[-1].text
+    zs = _reset(ctl)  # a head handed to the room-type scorer would be refused: it is left out instead
+    assert zs.policy.global_policy.scorer_name == "roomtype" and zs.policy.global_policy.head is None
+    assert zs.config_hash == _hash(_with_head(None), "l3mvn-zs")
+
+    ctl.set_policy("oracle")
+    ctl.set_head("rooms-bag")
+    assert "ignored by policy 'oracle', which uses no language scorer" in ctl.notices[-1].text
+    _reset(ctl)
+
+    ctl.set_policy("l3mvn-ff")
+    assert ctl.head == "rooms-bag"
+    assert _reset(ctl).policy.global_policy.scorer.kind == "rooms-bag"
+
+    ctl.set_head(DEFAULT_HEAD_CHOICE)
+    assert ctl.cfg.policy.head is None and ctl.head == DEFAULT_HEAD_CHOICE
+
+
+def test_the_dropdown_starts_on_the_configs_head_and_is_held_with_the_other_controls():
+    dash = start_dashboard(port=free_port(), houses=1, episodes_per_house=1, cfg=BAG, policy="l3mvn-ff")
+    try:
+        head = dash.view.head
+        assert head.value == "frontiers-bag" and tuple(head.options) == (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS
+        assert head in dash.view._held
+        assert "feed-forward scoring only (l3mvn-ff, near+llm or Scorer feedforward)" in head.hint
+    finally:
+        dash.stop()
+
