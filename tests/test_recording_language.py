@@ -72,6 +72,12 @@ def test_the_chosen_frontiers_per_goal_scores_and_the_fusion_line_are_recorded_p
     first = min(chosen)
     assert lines[first] == events[first].decision.frontiers[0].fusion.describe()
     assert lines[first].startswith("bound B = [0.15, 0.30]; max S_LLM")
+    # Once no frontier is the goal (here: the toilet seen), a line says no rule is in force, so a
+    # replayed or exported step never shows the last choice's rule behind a walk to the target.
+    after = next(ev for ev in events if ev.step > max(chosen) and ev.decision is not None)
+    assert after.decision.goal_kind != "frontier"
+    assert lines[after.step] == f"no frontier choice in force: the goal is {str(after.decision.goal_kind)!r}, not a frontier"
+    assert max(lines) == after.step  # and nothing more while no frontier is chosen again
     assert not _static(path, f"/{LANGUAGE_CHOSEN}_metres", "SeriesLines:names")  # the room scorer gives no metres
 
 

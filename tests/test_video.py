@@ -114,9 +114,12 @@ def test_a_language_episodes_frames_print_the_fusion_line_in_force_at_each_step(
     path, events = language
     ep = read_episode(path)
     line, expected = "", []
-    for ev in events:  # log/fusion is written at each new choice and holds until the next
-        if ev.decision is not None and ev.decision.frontiers and ev.decision.frontiers[0].fusion is not None:
-            line = ev.decision.frontiers[0].fusion.describe()
+    for ev in events:  # the rule behind the frontier chosen, until no frontier is the goal any more
+        d = ev.decision
+        if d is not None and d.chosen_frontier is not None:
+            line = next(f for f in d.frontiers if f.id == d.chosen_frontier).fusion.describe()
+        elif d is not None and line:
+            line = f"no frontier choice in force: the goal is {str(d.goal_kind)!r}, not a frontier"
         expected.append(line)
     assert [s.fusion for s in ep.steps] == expected
     assert ep.has_fusion and "" in expected, "the episode should start before its first choice"

@@ -231,11 +231,17 @@ class Recorder:
         self._log_series("metrics/chosen_frontier", {k: math.nan if v is None else v for k, v in parts.items()})
         if any(f.llm_scores for f in d.frontiers):
             self._log_language(d.frontiers, chosen)
+        # The rule's line at each new choice, and a line when no frontier is the goal any more (the
+        # target seen, a look goal, an escape): a replayed or exported step shows the rule in force.
+        fusion = None if chosen is None else chosen.fusion
+        if fusion is not self._last_fusion:
+            self._rec.log("log/fusion", rr.TextLog(fusion.describe() if fusion is not None else _no_rule(d.goal_kind)))
+        self._last_fusion = fusion
 
     def _log_language(self, frontiers: list, chosen) -> None:
         """Why the prior preferred a frontier, over time: the chosen frontier's p(goal) per goal (and
         a distance head's metres to each goal) in the map's category colours, every frontier's p(goal)
-        per goal as lines F<id>, and the fusion rule's line at every new choice."""
+        per goal as lines F<id>."""
         self._log_series(LANGUAGE_CHOSEN, {} if chosen is None else chosen.llm_scores, colors=category_color)
         if any(f.expected_m for f in frontiers):
             self._log_series(f"{LANGUAGE_CHOSEN}_metres", {} if chosen is None else chosen.expected_m,
@@ -246,10 +252,6 @@ class Recorder:
                 by_goal.setdefault(goal, {})[f"F{f.id}"] = p
         for goal, values in by_goal.items():
             self._log_series(f"{LANGUAGE_BY_GOAL}/{goal.replace(' ', '_')}", values)
-        fusion = frontiers[0].fusion  # one record per choice, shared by its frontiers
-        if fusion is not None and fusion is not self._last_fusion:
-            self._rec.log("log/fusion", rr.TextLog(fusion.describe()))
-        self._last_fusion = fusion
 
     def _log_series(self, entity: str, values: dict[str, float], colors=None) -> None:
         """One entity, one named line per key: a key's line index never changes, a missing value is
@@ -503,3 +505,8 @@ def _frontier_label(f, chosen: bool) -> str:
 
 def _fmt(v) -> str:
     return f"{v:.3f}" if isinstance(v, float) else str(v)
+
+
+def _no_rule(kind) -> str:
+    """The fusion line of a step whose goal is not a frontier: no rule is in force."""
+    return f"no frontier choice in force: the goal is {getattr(kind, 'value', kind)!r}, not a frontier"

@@ -247,7 +247,7 @@ def _assemble(path: Path, events: dict) -> RecordedEpisode:
         agent, goal_mark = latest["/map/agent"].at(step), latest["/map/goal"].at(step)
         strips = latest["/map/trajectory"].at(step)
         target = latest["/camera/rgb/target"].at(step)
-        fusion = latest["/log/fusion"].at(step)  # logged at each new choice, so in force until the next
+        fusion = latest["/log/fusion"].at(step)  # logged when the rule in force changes, so it holds until then
         ep.steps.append(_Step(
             step=step, rgb_png=_png(latest["/camera/rgb"].at(step)), goal=goal,
             decision=decisions.get(step, "reset: the episode starts" if step == 0 else ""),
