@@ -25,7 +25,7 @@ from app.map_image import agent_map_view, ground_truth_view
 from app.model_weights import scorer_problems
 from app.state import Cell, Frames, Metrics, Notice, Snapshot
 from l3mvn.config import Config, config_hash
-from l3mvn.config.policy import DEFAULT_HEAD, HEAD_KINDS
+from l3mvn.config.policy import DEFAULT_HEAD, HEAD_KINDS, HEAD_SCORER
 from l3mvn.datasets import EpisodeSet
 from l3mvn.errors import L3MVNError
 from l3mvn.events import EventBus, StepEvent
@@ -44,7 +44,6 @@ log = logging.getLogger(__name__)
 MIN_SPEED, MAX_SPEED = 0.5, 60.0
 DEFAULT_SCORER = "policy default"  # the scorer choice that keeps the policy's own
 DEFAULT_HEAD_CHOICE = f"default ({DEFAULT_HEAD})"  # the head choice that leaves policy.head unset
-HEADED_SCORER = "feedforward"  # the one scorer that reads a head
 MAX_QUEUED_STEPS = 5
 FRAME_WIDTH = 320  # camera frames are shown at most this wide
 
@@ -251,13 +250,13 @@ class DashboardController:
         head = None if name == DEFAULT_HEAD_CHOICE else name
         self.cfg = self.cfg.replace(policy=replace(self.cfg.policy, head=head))
         scorer = self._scorer_of(self.policy_name)
-        if scorer == HEADED_SCORER:
+        if scorer == HEAD_SCORER:
             self._notify(f"head {name!r} takes effect on the next Reset", client_id=client_id)
         else:
             scoring = f"scores with {scorer!r}" if scorer else "uses no language scorer"
             self._notify(f"head {name!r} is kept but ignored by policy {self.policy_name!r}, which {scoring}: only "
                          f"feed-forward scoring uses a head (policies {', '.join(self.headed_policies())}, "
-                         f"or Scorer {HEADED_SCORER})", client_id=client_id)
+                         f"or Scorer {HEAD_SCORER})", client_id=client_id)
         self._publish()  # every tab's Head dropdown follows
 
     def set_record(self, on: bool, *, client_id: int | None = None) -> None:
@@ -405,7 +404,7 @@ class DashboardController:
 
     @staticmethod
     def headed_policies() -> tuple[str, ...]:
-        return tuple(name for name, (scorer, *_) in LANGUAGE_POLICIES.items() if scorer == HEADED_SCORER)
+        return tuple(name for name, (scorer, *_) in LANGUAGE_POLICIES.items() if scorer == HEAD_SCORER)
 
     def _session_config(self, policy: str) -> Config:
         """The config a session of ``policy`` is built and hashed with: the Scorer choice for a language
@@ -413,7 +412,7 @@ class DashboardController:
         scorer = self._scorer_of(policy)
         p = self.cfg.policy
         return self.cfg.replace(policy=replace(p, scorer=scorer if self.scorer else p.scorer,
-                                               head=p.head if scorer == HEADED_SCORER else None))
+                                               head=p.head if scorer == HEAD_SCORER else None))
 
     def _runner_fits(self, cfg: Config, policy: str) -> bool:
         """Whether the warm runner builds ``policy`` as ``cfg`` says: its policies are cached by name, so

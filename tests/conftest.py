@@ -94,6 +94,18 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def serve_dashboard(**options):
+    """A dashboard on one procedural house and a free loopback port, stopped when the fixture that
+    yields from this ends: ``yield from serve_dashboard(policy=..., ...)``."""
+    from app.server import start_dashboard
+
+    d = start_dashboard(port=free_port(), houses=1, **options)
+    try:
+        yield d
+    finally:
+        d.stop()
+
+
 def write_frontier_file(folder: Path, houses=("Allensville", "Coffeen", "Hiteman"), choices: int = 12) -> Path:
     """A small `language frontier-data` file: in every house a frontier whose window holds a sink lies
     nearer the toilet than one that sees a couch (each episode closed by its "done" line)."""

@@ -22,7 +22,7 @@ import pytest
 
 sync_api = pytest.importorskip("playwright.sync_api")
 
-from conftest import free_port
+from conftest import free_port, serve_dashboard
 from test_dashboard_browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_text, _wait
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
@@ -38,10 +38,8 @@ from l3mvn.config import Config
 def dash(tmp_path_factory):
     cfg = Config().with_frame(240, 320)
     cfg = cfg.replace(sim=dataclasses.replace(cfg.sim, max_steps=60))
-    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="frontier", cfg=cfg,
-                        record_dir=tmp_path_factory.mktemp("rec"))
-    yield d
-    d.stop()
+    yield from serve_dashboard(episodes_per_house=2, policy="frontier", cfg=cfg,
+                               record_dir=tmp_path_factory.mktemp("rec"))
 
 
 @pytest.fixture

@@ -7,8 +7,7 @@ import time
 
 import pytest
 
-from conftest import free_port
-from app.server import start_dashboard
+from conftest import serve_dashboard
 from app.state import Notice
 from app.views import cell_to_xy, ray_to_cell
 from l3mvn.config import Config, SimConfig
@@ -20,9 +19,7 @@ SMALL = Config(sim=SimConfig().with_frame(120, 160))
 
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=3, cfg=SMALL, policy="oracle")
-    yield d
-    d.stop()
+    yield from serve_dashboard(episodes_per_house=3, cfg=SMALL, policy="oracle")
 
 
 @pytest.fixture

@@ -35,8 +35,7 @@ CHROMIUM = _find_chromium()
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
                                                          "`playwright install chromium` runs these tests")
 
-from conftest import free_port
-from app.server import start_dashboard  # noqa: E402
+from conftest import serve_dashboard
 from app.views import cell_to_xy  # noqa: E402
 from l3mvn.config import Config  # noqa: E402
 
@@ -75,10 +74,7 @@ def _screen_point(page, client, x: float, y: float) -> tuple[float, float]:
 
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="frontier",
-                        cfg=Config().with_frame(240, 320))
-    yield d
-    d.stop()
+    yield from serve_dashboard(episodes_per_house=2, policy="frontier", cfg=Config().with_frame(240, 320))
 
 
 def test_step_and_frontier_click_in_a_real_browser(dash, tmp_path):

@@ -17,7 +17,7 @@ import pytest
 
 sync_api = pytest.importorskip("playwright.sync_api")
 
-from conftest import free_port
+from conftest import free_port, serve_dashboard
 from test_dashboard_browser import (  # noqa: E402  (after the skip: it needs playwright too)
     CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_text, _step_shown, _wait,
 )
@@ -33,10 +33,7 @@ from l3mvn.config import Config  # noqa: E402
 
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=3, policy="frontier",
-                        cfg=Config().with_frame(240, 320))
-    yield d
-    d.stop()
+    yield from serve_dashboard(episodes_per_house=3, policy="frontier", cfg=Config().with_frame(240, 320))
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ import pytest
 
 sync_api = pytest.importorskip("playwright.sync_api")
 
-from conftest import free_port
+from conftest import serve_dashboard
 from test_dashboard_browser import (  # noqa: E402  (after the skip: it needs playwright too)
     CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_text, _step_shown, _wait,
 )
@@ -23,7 +23,6 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt inst
                                                          "`playwright install chromium` runs these tests")
 
 from app.language_panel import BAR_PX, SHOWN_FRONTIERS  # noqa: E402
-from app.server import start_dashboard  # noqa: E402
 from l3mvn.config import Config  # noqa: E402
 
 MAX_CLICKS = 40  # the look-around takes 12 steps; episode 0 of house 0 (toilet) chooses at step 13
@@ -31,10 +30,7 @@ MAX_CLICKS = 40  # the look-around takes 12 steps; episode 0 of house 0 (toilet)
 
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="l3mvn-zs",
-                        cfg=Config().with_frame(240, 320))
-    yield d
-    d.stop()
+    yield from serve_dashboard(episodes_per_house=2, policy="l3mvn-zs", cfg=Config().with_frame(240, 320))
 
 
 def test_the_language_folder_shows_bars_and_the_fusion_rule_of_the_choice(dash, tmp_path):

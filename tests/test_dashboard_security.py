@@ -18,7 +18,7 @@ import zstandard
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
-from conftest import free_port
+from conftest import free_port, serve_dashboard
 from app.cli import serve_main
 from app.origin import OriginPolicy
 from app.server import start_dashboard
@@ -125,9 +125,7 @@ def _connect(dash, origin: str | None) -> ClientConnection:
 
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, cfg=SMALL, policy="oracle")
-    yield d
-    d.stop()
+    yield from serve_dashboard(episodes_per_house=2, cfg=SMALL, policy="oracle")
 
 
 @pytest.fixture

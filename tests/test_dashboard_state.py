@@ -12,10 +12,9 @@ import time
 import numpy as np
 import pytest
 
-from conftest import free_port
+from conftest import serve_dashboard
 from app.map_image import TARGET_RINGS
 from app.model_weights import model_problem, scorer_problems
-from app.server import start_dashboard
 from app.session_worker import DashboardController
 from app.state import Notice, Snapshot
 from app.views import (
@@ -32,9 +31,7 @@ SMALL = Config(sim=SimConfig().with_frame(120, 160))
 
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=3, cfg=SMALL, policy="oracle")
-    yield d
-    d.stop()
+    yield from serve_dashboard(episodes_per_house=3, cfg=SMALL, policy="oracle")
 
 
 @pytest.fixture

@@ -10,19 +10,15 @@ import cv2
 import numpy as np
 import pytest
 
-from conftest import free_port
+from conftest import serve_dashboard
 from app.history_view import history_picture
-from app.server import start_dashboard
 from l3mvn.config import Config
 from l3mvn.errors import L3MVNError
 
 
 @pytest.fixture(scope="module")
 def dash():
-    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="frontier",
-                        cfg=Config().with_frame(120, 160))
-    yield d
-    d.stop()
+    yield from serve_dashboard(episodes_per_house=2, policy="frontier", cfg=Config().with_frame(120, 160))
 
 
 def _wait(what, until, timeout: float = 30.0) -> None:

@@ -9,9 +9,8 @@ import time
 import urllib.request
 
 import pytest
-from conftest import free_port
+from conftest import serve_dashboard
 
-from app.server import start_dashboard
 from l3mvn.errors import L3MVNError
 
 
@@ -23,9 +22,7 @@ def dash(tmp_path_factory):
                     "--episodes-per-house", "2", "--frame", "120x160", "--set", "sim.max_steps=15",
                     "--out", str(rec / "out.jsonl"), "--record", "--record-dir", str(rec)],
                    check=True, capture_output=True, env=env, timeout=600)
-    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="frontier", record_dir=rec)
-    yield d
-    d.stop()
+    yield from serve_dashboard(episodes_per_house=2, policy="frontier", record_dir=rec)
 
 
 def _answers(url: str, timeout: float = 30.0) -> int:

@@ -21,6 +21,7 @@ SELECTIONS = ("paper", "official_code", "expected")
 # (the ablation that says what MiniLM adds; l3mvn/data/language/MODEL_CARD.md).
 HEAD_KINDS = ("frontiers", "rooms", "frontiers-bag", "rooms-bag")
 DEFAULT_HEAD = "rooms"
+HEAD_SCORER = "feedforward"  # the one language scorer that reads a head
 
 
 @dataclass(frozen=True)

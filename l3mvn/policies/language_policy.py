@@ -30,6 +30,7 @@ from functools import lru_cache
 import numpy as np
 
 from l3mvn.config import SELECTIONS, FrontierConfig, PolicyConfig
+from l3mvn.config.policy import HEAD_SCORER
 from l3mvn.errors import L3MVNError
 from l3mvn.frontiers import Frontier, Fusion
 from l3mvn.policies.global_policies import LanguageScore, Selection
@@ -51,8 +52,8 @@ def _shared_scorer(name: str, head: str | None):
 
     if head is None:
         return make_scorer(name)
-    if name != "feedforward":
-        raise L3MVNError(f"a head ({head!r}) applies to the feedforward scorer only, not {name!r}")
+    if name != HEAD_SCORER:
+        raise L3MVNError(f"a head ({head!r}) applies to the {HEAD_SCORER} scorer only, not {name!r}")
     return make_scorer(name, head=head)
 
 
@@ -69,15 +70,15 @@ class LanguageFrontierPolicy:
             raise L3MVNError(f"unknown exploration score {exploration!r}; valid: cost-utility, nearest")
         self.name, self.scorer_name = name, scorer
         self.exploration, self.selection, self.paradigm = exploration, selection, paradigm
-        if head is not None and scorer != "feedforward":
-            raise L3MVNError(f"a head ({head!r}) applies to the feedforward scorer only, not {scorer!r}")
+        if head is not None and scorer != HEAD_SCORER:
+            raise L3MVNError(f"a head ({head!r}) applies to the {HEAD_SCORER} scorer only, not {scorer!r}")
         if selection == "expected" and not cu_lambda > 0:
             raise L3MVNError(f"selection 'expected' needs frontiers.cu_lambda > 0 (cost-utility in metres), got {cu_lambda}")
         self.bound, self.head, self.cu_lambda = bound, head, cu_lambda
         self.scorer = self._make(scorer)
 
     def _make(self, scorer: str):
-        made = shared_scorer(scorer, self.head if scorer == "feedforward" else None)
+        made = shared_scorer(scorer, self.head if scorer == HEAD_SCORER else None)
         if self.selection == "expected" and not getattr(made, "predicts_distance", False):
             raise L3MVNError(f"selection 'expected' needs a scorer that predicts distances (feedforward with "
                              f"head 'frontiers' or 'frontiers-bag'), not {scorer!r}; valid selections for it: paper, official_code")
