@@ -14,7 +14,6 @@ from typing import Any
 import numpy as np
 
 
-
 @dataclass(frozen=True)
 class Fusion:
     """How a language policy turned its frontier scores into a choice, with every number it compared.
