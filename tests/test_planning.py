@@ -213,6 +213,21 @@ def test_failed_forward_step_blocks_cells_ahead_and_the_next_plan_goes_around():
     assert second.distance_to_goal_m > first.distance_to_goal_m
 
 
+def test_a_failed_step_towards_the_target_leaves_the_passage_beside_it_open():
+    """Forkland: bumping into floor the navmesh lost, right beside the only passage to the toilet.
+    An exploring mark (5 cells wide) closes the passage; the target's (1, then 3 wide) does not."""
+    obstacle = _room()
+    obstacle[:, 33] = True
+    obstacle[57:64, 33] = False  # passable rows 58-62 once the wall grows by a cell
+    for target, widths_open in ((False, [False, False]), (True, [True, True])):
+        planner = LocalPlanner(PlannerConfig(), RES)
+        planner.plan(obstacle, (60, 30), 0.0, (60, 100), target=target)
+        for still_open in widths_open:
+            plan = planner.plan(obstacle, (60, 30), 0.0, (60, 100), last_move_m=0.0, target=target)
+            assert plan.collided and plan.reachable == still_open, target
+    assert planner.collision_map[59:62, 33].all() and not planner.collision_map[[58, 62], 33].any()
+
+
 def test_forward_step_that_moved_enough_is_not_a_collision():
     planner = _planner()
     plan = planner.plan(_room(), (60, 30), 0.0, (60, 100), last_move_m=0.12)

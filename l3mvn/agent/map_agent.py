@@ -244,7 +244,7 @@ class MapAgent:
                 radius = self.cfg.frontier_press_m
         return self.planner.plan(sem_map.obstacle, sem_map.agent_cell, sem_map.agent_heading, goal,
                                  last_move_m=last_move, goal_reached_radius_m=radius,
-                                 goal_dilation_m=dilation)
+                                 goal_dilation_m=dilation, target=kind in (GoalKind.TARGET, GoalKind.CANDIDATE))
 
     def _finish_looking(self, sem_map: SemanticMap, goal: tuple[int, int], kind: str, plan, reason: str,
                         last_move: float | None):

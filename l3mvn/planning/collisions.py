@@ -1,7 +1,8 @@
 """Failed forward steps: the cells they block (the collision map) and whether the agent is stuck.
 
 A forward step that moved less than ``collision_threshold_m`` blocks a rectangle ahead of the agent,
-wider with every consecutive collision; the planner treats those cells as obstacles. Stuck means too
+wider with every consecutive collision (narrower marks while approaching a target, where one wide mark
+can close the last passage); the planner treats those cells as obstacles. Stuck means too
 many collisions, or too little displacement, within the last ``stuck_window_steps``.
 """
 
@@ -42,8 +43,10 @@ class CollisionTracker:
         self._recent_collisions.clear()
         self._recent_cells.clear()
 
-    def record(self, agent: tuple[int, int], heading: float, last_move_m: float | None) -> bool:
-        """Mark the cells ahead as blocked when a forward step moved less than the threshold."""
+    def record(self, agent: tuple[int, int], heading: float, last_move_m: float | None, *,
+               target: bool = False) -> bool:
+        """Mark the cells ahead as blocked when a forward step moved less than the threshold; with
+        ``target`` (approaching the goal object) the narrower target widths apply."""
         cfg = self.cfg
         collided = False
         if last_move_m is not None:
@@ -52,10 +55,9 @@ class CollisionTracker:
             collided = last_move_m < cfg.collision_threshold_m
             self._consecutive_collisions = self._consecutive_collisions + 1 if collided else 0
         if collided:
-            width = min(
-                cfg.collision_mark_width_cells + 2 * (self._consecutive_collisions - 1),
-                cfg.collision_mark_max_width_cells,
-            )
+            first, widest = ((cfg.collision_mark_target_width_cells, cfg.collision_mark_target_max_width_cells)
+                             if target else (cfg.collision_mark_width_cells, cfg.collision_mark_max_width_cells))
+            width = min(first + 2 * (self._consecutive_collisions - 1), widest)
             ahead = np.arange(
                 cfg.collision_mark_offset_cells,
                 cfg.collision_mark_offset_cells + cfg.collision_mark_length_cells - 0.5 + 1e-9,

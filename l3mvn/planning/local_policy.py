@@ -93,6 +93,7 @@ class LocalPlanner:
         last_move_m: float | None = None,
         goal_reached_radius_m: float = 0.5,
         goal_dilation_m: float | None = None,
+        target: bool = False,
     ) -> Plan:
         """Choose the next action toward ``goal``.
 
@@ -104,6 +105,7 @@ class LocalPlanner:
         goal_dilation_m: overrides the config's for this call. The 0.5 m disk suits an object
         (approached from any free side), but it reaches through walls: an exploration goal needs
         a small one, or a frontier behind a wall reads as reached from the wrong room.
+        target: the goal is the object itself; a failed step then lays the narrower target marks.
         """
         obstacle = self._check_map(obstacle)
         agent = _check_cell(agent_cell, obstacle.shape)
@@ -113,7 +115,7 @@ class LocalPlanner:
             raise L3MVNError(f"goal_reached_radius_m must be >= 0, got {goal_reached_radius_m}")
         goal_rows, goal_cols = _goal_cells(goal, obstacle.shape)
         dilation = self._dilation_cells(goal_dilation_m)
-        collided = self._collisions.record(agent, heading, last_move_m)
+        collided = self._collisions.record(agent, heading, last_move_m, target=target)
 
         nearest_goal = _nearest(agent, goal_rows, goal_cols)
         field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols, nearest_goal,
@@ -211,9 +213,6 @@ def _goal_cells(goal: np.ndarray | tuple[int, int], shape: tuple[int, int]) -> t
 def _nearest(agent: tuple[int, int], rows: np.ndarray, cols: np.ndarray) -> tuple[int, int]:
     i = int(np.argmin((rows - agent[0]) ** 2 + (cols - agent[1]) ** 2))
     return int(rows[i]), int(cols[i])
-
-
-__all__ = ["PlannerConfig", "Plan", "LocalPlanner"]
 
 
 __all__ = ["PlannerConfig", "Plan", "LocalPlanner"]
