@@ -252,3 +252,17 @@ def test_a_malformed_result_file_names_its_line(recorded, tmp_path, capsys):
     bad.write_text('{"scene": "a", "success": 0}\n{oops\n')
     assert _cli("--results", str(bad), "--recordings", str(tmp_path), "--out", str(tmp_path / "o")) == 2
     assert "r.jsonl line 2 is not JSON" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("at", [(2, 60), (318, 60), (160, 1), (160, 118), (1, 1), (318, 118)])
+def test_a_map_label_beside_the_panel_edge_stays_whole_inside_it(at):
+    """A target at the map's left edge read "arget: toilet": the label's box now lies inside the panel,
+    and beside the point when there is room, clear of labels already placed."""
+    from l3mvn.recording.video import _place_label
+
+    img = np.zeros((120, 320, 3), np.uint8)
+    placed = [(at[0] - 5, at[1] - 5, at[0] + 5, at[1] + 5)]
+    box = _place_label(img, "target: toilet", at, placed, (255, 255, 255))
+    assert 0 <= box[0] and 0 <= box[1] and box[2] < 320 and box[3] < 120
+    assert not (box[0] <= at[0] <= box[2] and box[1] <= at[1] <= box[3])  # never over its own point
+    assert img[box[1]:box[3] + 1, box[0]:box[2] + 1].any() and placed[-1] == box

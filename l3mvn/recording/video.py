@@ -478,18 +478,29 @@ def _map_panel(ep: RecordedEpisode, s: _Step, lut: np.ndarray, size: tuple[int, 
     return img
 
 
-def _place_label(img: np.ndarray, text: str, at: tuple[int, int], placed: list, rgb) -> None:
+def _place_label(img: np.ndarray, text: str, at: tuple[int, int], placed: list, rgb) -> tuple[int, int, int, int]:
     """Put ``text`` beside the point at the first spot (right, left, above, below, further out) that
-    overlaps no label or marker already placed: labels never cover each other."""
+    lies inside the panel and overlaps no label or marker already placed: labels never cover each
+    other, and one beside the map's edge is not cut off (a toilet at the left edge read "arget").
+    Returns the box it took."""
     (tw, th), base = cv2.getTextSize(text, FONT, 0.45, 1)
     x, y = at
-    for dx, dy in ((8, 4), (-tw - 8, 4), (-tw // 2, -10), (-tw // 2, th + 12), (8, -14), (8, th + 14),
-                   (-tw - 8, -14), (-tw - 8, th + 14)):
-        box = (x + dx - 2, y + dy - th - 2, x + dx + tw + 2, y + dy + base + 1)
-        if all(box[2] < p[0] or box[0] > p[2] or box[3] < p[1] or box[1] > p[3] for p in placed):
-            break
+    h, w = img.shape[:2]
+    boxes = [(x + dx - 2, y + dy - th - 2, x + dx + tw + 2, y + dy + base + 1)
+             for dx, dy in ((8, 4), (-tw - 8, 4), (-tw // 2, -10), (-tw // 2, th + 12), (8, -14), (8, th + 14),
+                            (-tw - 8, -14), (-tw - 8, th + 14))]
+    inside = [b for b in boxes if b[0] >= 0 and b[1] >= 0 and b[2] < w and b[3] < h]
+    clear = [b for b in inside if all(b[2] < p[0] or b[0] > p[2] or b[3] < p[1] or b[1] > p[3] for p in placed)]
+    box = (clear or inside or [_shift_inside(boxes[0], w, h)])[0]
     placed.append(box)
     _label(img, text, (box[0] + 2, box[3] - base - 1), rgb)
+    return box
+
+
+def _shift_inside(box: tuple[int, int, int, int], w: int, h: int) -> tuple[int, int, int, int]:
+    dx = max(0, -box[0]) - max(0, box[2] - (w - 1))
+    dy = max(0, -box[1]) - max(0, box[3] - (h - 1))
+    return box[0] + dx, box[1] + dy, box[2] + dx, box[3] + dy
 
 
 def _label(img: np.ndarray, text: str, at: tuple[int, int], rgb, scale: float = 0.45) -> None:
