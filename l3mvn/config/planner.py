@@ -30,7 +30,7 @@ class PlannerConfig:
     # Approaching the target, marks start one cell wide and widen to five (SemExp's own widths): the
     # floor round a toilet is tight, and a 5-9 cell mark laid after bumping into floor the navmesh lost
     # closed the walkable passage beside it, 0.1 m from the success region (Forkland/0/1, /0/6).
-    # Exploring keeps the wide marks: narrow ones there cost 0.04 SR in repeated collisions.
+    # Exploring keeps the wide marks: narrow ones there cost 0.025-0.04 SR in repeated collisions.
     collision_mark_target_width_cells: int = 1
     collision_mark_target_max_width_cells: int = 5
     # Stuck: this many collisions, or less than this displacement, within the last window of steps.
