@@ -184,12 +184,11 @@ class MapAgent:
         self._unreachable = 0 if plan.reachable else self._unreachable + 1
         if plan.reached and kind == GoalKind.TARGET:
             action, reason = Action.STOP, f"{self.goal} {_straight_m(sem_map, goal):.2f} m away: stop"
-        elif kind == GoalKind.TARGET and (not plan.reachable or plan.stuck or plan.collided) \
+        elif kind == GoalKind.TARGET and (not plan.reachable or plan.stuck) \
                 and (near := _straight_m(sem_map, goal)) <= self.cfg.blocked_stop_distance_m:
             # Seen over a counter or through a gap the map closes, or the floor ends short of it
             # (Hiteman: pushed 380 steps along the navmesh edge 0.90 m from a toilet): as near as
-            # the free space allows. A failed step is that evidence too: Hiteman/0/5 bumped 0.94 m
-            # from its toilet, inside the success region, for 20 steps without the stuck signal.
+            # the free space allows.
             action, reason = Action.STOP, f"{self.goal} {near:.2f} m away (no path closer): stop"
         elif kind in (GoalKind.CANDIDATE, GoalKind.TARGET) and self._unreachable >= self.cfg.escape_after_unreachable and (
             kind == GoalKind.CANDIDATE or search.escapes >= self.cfg.target_escapes
