@@ -16,7 +16,7 @@ from app.state import Cell, FrontierMarker, MapView
 from l3mvn.events import Decision
 from l3mvn.scenes.scene import SceneMap
 from l3mvn.types import Pose
-from l3mvn.viz import category_palette, legend
+from l3mvn.viz import COLLISION_RGB, category_palette, legend
 
 UNEXPLORED = (28, 30, 36)
 FREE = (226, 226, 220)
@@ -46,6 +46,10 @@ def agent_map_view(decision: Decision, target: str = "") -> MapView:
     img[m.explored[rows, cols]] = FREE
     img[m.explored[rows, cols] & ~m.looked[rows, cols]] = GLIMPSED
     img[m.obstacle[rows, cols]] = OBSTACLE
+    if decision.collision_marks is not None and len(decision.collision_marks):
+        marks = decision.collision_marks - (r0, c0)
+        inside = ((marks >= 0) & (marks < (r1 - r0, c1 - c0))).all(axis=1)
+        img[marks[inside, 0], marks[inside, 1]] = COLLISION_RGB
     shown = _paint_categories(img, m.categories[:, rows, cols], m.category_names, target)
     img[m.visited[rows, cols]] = TRAJECTORY
     scale = _scale(img.shape)

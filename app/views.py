@@ -39,7 +39,7 @@ from app.viser_hooks import (
 from l3mvn.errors import L3MVNError
 from l3mvn.registry import DIRECT_POLICIES, POLICY_NAMES, TELEOP
 from l3mvn.scenes.scene import GOAL_CATEGORIES
-from l3mvn.viz import legend
+from l3mvn.viz import COLLISION_RGB, legend
 
 log = logging.getLogger(__name__)
 
@@ -833,7 +833,7 @@ def _legend_html(categories, *, target: str = "", ground_truth: bool = False) ->
     from app.map_image import FREE, GLIMPSED, OBSTACLE, TRAJECTORY, UNEXPLORED
 
     fixed = [("unexplored", UNEXPLORED), ("free", FREE), ("seen from afar", GLIMPSED), ("obstacle", OBSTACLE),
-             ("trajectory", TRAJECTORY)]
+             ("collision marks", COLLISION_RGB), ("trajectory", TRAJECTORY)]
     item = '<span style="display:inline-block;margin:2px 8px 2px 0;font-size:12px">{}</span>'
     cats = sorted(categories, key=lambda c: c[0] != target)
     parts = [item.format(_swatch(rgb) + name) for name, rgb in fixed]

@@ -14,6 +14,8 @@ import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+import numpy as np
+
 from l3mvn.types import Action, Observation, Pose
 
 log = logging.getLogger(__name__)
@@ -55,6 +57,9 @@ class Decision:
     target_seen: bool = False
     stuck: bool = False
     timings_ms: dict[str, float] = field(default_factory=dict)
+    # (N, 2) int32 map cells the agent's failed forward steps blocked: walls to the planner, though
+    # the map may show free floor there (what closed Forkland/0/6's way to its toilet).
+    collision_marks: np.ndarray | None = None
 
 
 @dataclass

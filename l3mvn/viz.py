@@ -13,6 +13,8 @@ import numpy as np
 from l3mvn.errors import L3MVNError
 
 BACKGROUND_RGB = (40, 40, 40)
+# Cells the agent's failed forward steps blocked (walls to its planner); violet, far from every category.
+COLLISION_RGB = (90, 0, 225)
 
 # Hand-picked, mutually distinct colours for the categories people look at most.
 _NAMED_RGB: dict[str, tuple[int, int, int]] = {

@@ -280,3 +280,34 @@ def test_teleop_refuses_to_act_on_its_own():
     agent = TeleopAgent(GLOBAL_POLICIES["cost-utility"](), ("chair",), SMALL)
     with pytest.raises(L3MVNError, match="acts only when driven"):
         agent.act(None)
+
+
+def test_the_agents_collision_marks_show_on_its_map_in_their_own_legend_colour():
+    """Forkland/0/6: marks laid on floor the map shows free closed the way to a seen toilet, and
+    nothing on the page showed them. They are painted over free floor, in a colour no category has."""
+    from app.map_image import FREE, agent_map_view
+    from l3mvn.viz import COLLISION_RGB
+    from l3mvn.scenes.categories import SCAN_CATEGORIES
+    from l3mvn.scenes.procedural import PROCEDURAL_CATEGORIES
+    from l3mvn.events import Decision
+    from l3mvn.mapping import SemanticMap
+    from l3mvn.types import Action
+
+    n = 80
+    explored = np.zeros((n, n), bool)
+    explored[20:60, 20:60] = True
+    sem_map = SemanticMap(obstacle=np.zeros((n, n), bool), explored=explored, visited=np.zeros((n, n), bool),
+                          categories=np.zeros((1, n, n), bool), category_names=("toilet",), looked=explored,
+                          resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=(40, 40), agent_heading=0.0,
+                          local_cells=n, footprint_radius_cells=3)
+    marks = np.array([[40, 43], [41, 43], [39, 43]], np.int32)
+    view = agent_map_view(Decision(action=Action.MOVE_FORWARD, map=sem_map, collision_marks=marks))
+    r0, c0 = view.origin
+
+    def pixel(r: int, c: int) -> tuple:
+        return tuple(view.image[(r - r0) * view.scale, (c - c0) * view.scale])
+
+    assert all(pixel(r, c) == COLLISION_RGB for r, c in marks) and pixel(40, 50) == FREE
+    assert "collision marks" in _legend_html(view.legend)
+    colours = np.array([category_color(name) for name in PROCEDURAL_CATEGORIES + SCAN_CATEGORIES], float)
+    assert np.linalg.norm(colours - np.array(COLLISION_RGB, float), axis=1).min() > 40

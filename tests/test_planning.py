@@ -228,6 +228,21 @@ def test_a_failed_step_towards_the_target_leaves_the_passage_beside_it_open():
     assert planner.collision_map[59:62, 33].all() and not planner.collision_map[[58, 62], 33].any()
 
 
+def test_the_marked_cells_are_listed_for_views_as_arrays_that_never_change_under_a_reader():
+    planner = _planner()
+    planner.plan(_room(), (60, 30), 0.0, (60, 100))
+    assert len(planner.collision_cells) == 0
+    planner.plan(_room(), (60, 30), 0.0, (60, 100), last_move_m=0.0)
+    first = planner.collision_cells
+    assert sorted(map(tuple, first.tolist())) == sorted(map(tuple, np.argwhere(planner.collision_map).tolist()))
+    kept = first.copy()
+    planner.plan(_room(), (60, 30), math.pi / 2, (60, 100), last_move_m=0.0)  # a second, wider mark
+    assert len(planner.collision_cells) > len(first) and np.array_equal(first, kept)
+    assert len(np.unique(planner.collision_cells, axis=0)) == len(planner.collision_cells)
+    planner.clear_collisions()
+    assert len(planner.collision_cells) == 0 and np.array_equal(first, kept)
+
+
 def test_forward_step_that_moved_enough_is_not_a_collision():
     planner = _planner()
     plan = planner.plan(_room(), (60, 30), 0.0, (60, 100), last_move_m=0.12)

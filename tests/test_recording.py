@@ -95,6 +95,30 @@ def test_map_agent_episode_records_map_frontiers_goal_and_trajectory(tiny_scene,
     assert len(_values(recorder.path, "/map/frontiers", "score_cu")) == len(labels)  # every score on hover
 
 
+def test_the_agents_collision_marks_are_recorded_once_per_change_at_their_cells(tiny_scene, tmp_path, monkeypatch):
+    """What closed a passage the map shows free (Forkland/0/6) must be visible in a replay too."""
+    from l3mvn.planning import LocalPlanner
+
+    marks = np.array([[480, 484], [481, 484], [482, 485]], np.int32)  # beside the start, the map centre
+    monkeypatch.setattr(LocalPlanner, "collision_cells", property(lambda self: marks))
+    recorder, _, _ = _record(Runner(CONFIG), tiny_scene, "frontier", tmp_path)
+    assert recorder.errors == 0
+    positions = _rows(recorder.path, "/map/collision_marks", "Points2D:positions")
+    assert len(positions) == 1  # the same array every step: written once
+    assert np.allclose(positions[0], marks[:, ::-1] + 0.5)
+    # The exported video draws them too: the last frame holds the marks' colour, and only because of them.
+    from l3mvn.recording.video import VideoOptions, frames, read_episode
+    from l3mvn.viz import COLLISION_RGB
+
+    episode = read_episode(recorder.path)
+    assert np.allclose(episode.steps[-1].collision_marks, marks[:, ::-1] + 0.5)
+    last = list(frames(episode, VideoOptions(height=240), title_frames=0))[-1]
+    assert (last == COLLISION_RGB).all(axis=2).any()
+    episode.steps[-1] = dataclasses.replace(episode.steps[-1], collision_marks=None)
+    last = list(frames(episode, VideoOptions(height=240), title_frames=0))[-1]
+    assert not (last == COLLISION_RGB).all(axis=2).any()
+
+
 def _rows(path, entity, column):
     """Each logged row of one component column of one entity, in step order."""
     out = []

@@ -310,7 +310,7 @@ class MapAgent:
             action=action, reason=reason, map=sem_map, frontiers=explore.frontiers, long_term_goal=ltg,
             goal_kind=kind, chosen_frontier=explore.frontier if kind == GoalKind.FRONTIER else None,
             short_term_goal=stg, override=override, target_seen=kind == GoalKind.TARGET, stuck=self.stuck,
-            timings_ms=timings,
+            timings_ms=timings, collision_marks=self.planner.collision_cells,
         )
 
 

@@ -23,6 +23,7 @@ class CollisionTracker:
     def __init__(self, cfg: PlannerConfig, resolution_m: float) -> None:
         self.cfg, self.resolution_m = cfg, resolution_m
         self.map: np.ndarray | None = None
+        self._cells = np.zeros((0, 2), dtype=np.int32)  # the marked cells, in marking order
         self._consecutive_collisions = 0
         window = cfg.stuck_window_steps
         self._recent_collisions: collections.deque[bool] = collections.deque(maxlen=window)
@@ -39,6 +40,7 @@ class CollisionTracker:
         """Forget the marks and the history (an agent escaping a trap it marked itself)."""
         if self.map is not None:
             self.map.fill(False)
+        self._cells = np.zeros((0, 2), dtype=np.int32)
         self._consecutive_collisions = 0
         self._recent_collisions.clear()
         self._recent_cells.clear()
@@ -72,9 +74,20 @@ class CollisionTracker:
             shape = self.map.shape
             ok = (rows >= 0) & (rows < shape[0]) & (cols >= 0) & (cols < shape[1])
             ok &= (rows != agent[0]) | (cols != agent[1])
-            self.map[rows[ok], cols[ok]] = True
+            rows, cols = rows[ok], cols[ok]
+            fresh = np.unique((rows * shape[1] + cols)[~self.map[rows, cols]])
+            self.map[rows, cols] = True
+            if len(fresh):
+                added = np.stack(np.divmod(fresh, shape[1]), axis=1).astype(np.int32)
+                self._cells = np.concatenate([self._cells, added])
         self._recent_collisions.append(collided)
         return collided
+
+    @property
+    def cells(self) -> np.ndarray:
+        """(N, 2) int32 (row, col) of every marked cell; a new array whenever a mark is added, so a
+        reference kept by a step event never changes under it."""
+        return self._cells
 
     def stuck(self, agent: tuple[int, int]) -> bool:
         """Too many collisions, or too little displacement, within the last window of steps."""

@@ -83,6 +83,11 @@ class LocalPlanner:
         """(M, M) bool cells blocked by failed forward steps (None before the first plan)."""
         return self._collisions.map
 
+    @property
+    def collision_cells(self) -> np.ndarray:
+        """(N, 2) int32 cells of ``collision_map``, for views (cheaper than scanning the map)."""
+        return self._collisions.cells
+
     def plan(
         self,
         obstacle: np.ndarray,

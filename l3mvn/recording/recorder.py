@@ -20,7 +20,7 @@ from l3mvn.recording.layout import (
     default_blueprint, map_view_bounds, score_colors,
 )
 from l3mvn.types import Episode
-from l3mvn.viz import BACKGROUND_RGB, category_color, category_palette
+from l3mvn.viz import BACKGROUND_RGB, COLLISION_RGB, category_color, category_palette
 
 log = logging.getLogger(__name__)
 
@@ -76,6 +76,7 @@ class Recorder:
         self._resolution_m = 0.0
         self._last_target: tuple = ()
         self._last_fusion = None  # the Fusion record last written to log/fusion
+        self._last_marks: np.ndarray | None = None  # the collision marks last written (a new array per change)
         self.log_ms: list[float] = []  # this recorder's own cost per event, for budgets and benchmarks
 
     @classmethod
@@ -290,6 +291,7 @@ class Recorder:
                 rr.Arrows2D(origins=[here], vectors=[heading], colors=[AGENT_RGB]))
 
         self._log_goal(d)
+        self._log_collision_marks(d.collision_marks)
         self._log_point("map/short_term_goal", d.short_term_goal, 2.0, (255, 160, 0), None)
         self._log_frontiers(d.frontiers, d.chosen_frontier)
         if d.long_term_goal is not None:
@@ -356,6 +358,19 @@ class Recorder:
                       rr.LineStrips2D([[(x - arm, y - arm), (x + arm, y + arm)],
                                        [(x - arm, y + arm), (x + arm, y - arm)]],
                                       colors=[GOAL_RGB], radii=[0.8], draw_order=40))
+
+    def _log_collision_marks(self, marks: np.ndarray | None) -> None:
+        """The cells the agent's failed steps blocked, written when they change: a replay shows what
+        closed a passage the map shows free."""
+        if marks is self._last_marks:
+            return
+        self._last_marks = marks
+        if marks is None or not len(marks):
+            self._clear("map/collision_marks")
+            return
+        self._cleared["map/collision_marks"] = False
+        self._rec.log("map/collision_marks", rr.Points2D(marks[:, ::-1] + 0.5, colors=[COLLISION_RGB], radii=[0.5],
+                                                         draw_order=30))
 
     def _log_point(self, entity: str, cell, radius: float, rgb, label: str | None) -> None:
         if cell is None:

@@ -26,6 +26,7 @@ import numpy as np
 from l3mvn.errors import L3MVNError, first_line
 from l3mvn.recording.catalogue import TIMELINE, find_recording, open_recording, recording_name_part
 from l3mvn.recording.layout import AGENT_RGB, GOAL_RGB, TARGET_RGB, VIEW_MARGIN, score_colors
+from l3mvn.viz import COLLISION_RGB
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX  # pictures drawn from recordings (video and the dashboard's compare view)
 PANEL_BG = (24, 24, 24)
@@ -98,6 +99,7 @@ class _Step:
     map_ids: tuple[int, int, np.ndarray] | None  # (row, col) offset and the mapped window of the ids
     frontiers: _Marks | None
     frontier_cells: _Marks | None
+    collision_marks: np.ndarray | None  # (N, 2) x, y of the cells the agent's failed steps blocked
     trajectory: np.ndarray | None
     agent: tuple[np.ndarray, np.ndarray] | None  # position and heading vector
     goal_mark: _Marks | None
@@ -142,6 +144,7 @@ _WANTED = {
     "/map/semantic": ("SegmentationImage:buffer", "SegmentationImage:format"),
     "/map/frontiers": ("Points2D:positions", "Points2D:colors", "Points2D:labels", "Points2D:radii"),
     "/map/frontier_cells": ("Points2D:positions", "Points2D:colors"),
+    "/map/collision_marks": ("Points2D:positions",),
     "/map/trajectory": ("LineStrips2D:strips",),
     "/map/agent": ("Points2D:positions", "Arrows2D:vectors"),
     "/map/goal": ("Points2D:positions", "Points2D:colors", "Points2D:labels"),
@@ -245,7 +248,7 @@ def _assemble(path: Path, events: dict) -> RecordedEpisode:
         ids = _map_window(latest["/map/semantic"].at(step))
         frontiers, cells = latest["/map/frontiers"].at(step), latest["/map/frontier_cells"].at(step)
         agent, goal_mark = latest["/map/agent"].at(step), latest["/map/goal"].at(step)
-        strips = latest["/map/trajectory"].at(step)
+        strips, marks = latest["/map/trajectory"].at(step), latest["/map/collision_marks"].at(step)
         target = latest["/camera/rgb/target"].at(step)
         fusion = latest["/log/fusion"].at(step)  # logged when the rule in force changes, so it holds until then
         ep.steps.append(_Step(
@@ -253,6 +256,7 @@ def _assemble(path: Path, events: dict) -> RecordedEpisode:
             decision=decisions.get(step, "reset: the episode starts" if step == 0 else ""),
             fusion="" if fusion is None else fusion["TextLog:text"][0], map_ids=ids,
             frontiers=_marks(frontiers), frontier_cells=_marks(cells),
+            collision_marks=None if marks is None else marks.get("Points2D:positions"),
             trajectory=None if strips is None else strips["LineStrips2D:strips"],
             agent=None if agent is None else (agent["Points2D:positions"][0], agent["Arrows2D:vectors"][0]),
             goal_mark=_marks(goal_mark),
@@ -445,9 +449,12 @@ def _map_panel(ep: RecordedEpisode, s: _Step, lut: np.ndarray, size: tuple[int, 
     for x0, y0, x1, y1 in boxes:
         cv2.rectangle(img, (x0 - 2, y0 - 2), (x1 + 2, y1 + 2), (255, 255, 255), 4)
         cv2.rectangle(img, (x0 - 2, y0 - 2), (x1 + 2, y1 + 2), TARGET_RGB, 2)
+    half = max(1, int(k / 2))
+    if s.collision_marks is not None and len(s.collision_marks):
+        for x, y in px(s.collision_marks):
+            img[max(y - half, 0): y + half + 1, max(x - half, 0): x + half + 1] = COLLISION_RGB
     if s.frontier_cells is not None and len(s.frontier_cells.xy):
         cells = px(s.frontier_cells.xy)
-        half = max(1, int(k / 2))
         for (x, y), rgb in zip(cells, s.frontier_cells.rgb):
             img[max(y - half, 0): y + half + 1, max(x - half, 0): x + half + 1] = rgb
     if s.trajectory is not None and len(s.trajectory) > 1:
