@@ -9,8 +9,7 @@ import dataclasses
 
 import pytest
 
-from conftest import free_port
-from app.server import start_dashboard
+from conftest import serve_dashboard
 from app.session_worker import DEFAULT_HEAD_CHOICE, DashboardController
 from l3mvn.config import Config, PolicyConfig, SimConfig, config_hash
 from l3mvn.config.policy import HEAD_KINDS
@@ -98,13 +97,13 @@ def test_the_head_survives_a_policy_change_and_policies_that_ignore_it_say_so_an
     assert ctl.cfg.policy.head is None and ctl.head == DEFAULT_HEAD_CHOICE
 
 
-def test_the_dropdown_starts_on_the_configs_head_and_is_held_with_the_other_controls():
-    dash = start_dashboard(port=free_port(), houses=1, episodes_per_house=1, cfg=BAG, policy="l3mvn-ff")
-    try:
-        head = dash.view.head
-        assert head.value == "frontiers-bag" and tuple(head.options) == (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS
-        assert head in dash.view._held
-        assert "feed-forward scoring only (l3mvn-ff, near+llm or Scorer feedforward)" in head.hint
-    finally:
-        dash.stop()
+@pytest.fixture
+def dash():
+    yield from serve_dashboard(episodes_per_house=1, cfg=BAG, policy="l3mvn-ff")
 
+
+def test_the_dropdown_starts_on_the_configs_head_and_is_held_with_the_other_controls(dash):
+    head = dash.view.head
+    assert head.value == "frontiers-bag" and tuple(head.options) == (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS
+    assert head in dash.view._held
+    assert "feed-forward scoring only (l3mvn-ff, near+llm or Scorer feedforward)" in head.hint

@@ -451,12 +451,9 @@ def _map_panel(ep: RecordedEpisode, s: _Step, lut: np.ndarray, size: tuple[int, 
         cv2.rectangle(img, (x0 - 2, y0 - 2), (x1 + 2, y1 + 2), TARGET_RGB, 2)
     half = max(1, int(k / 2))
     if s.collision_marks is not None and len(s.collision_marks):
-        for x, y in px(s.collision_marks):
-            img[max(y - half, 0): y + half + 1, max(x - half, 0): x + half + 1] = COLLISION_RGB
+        _paint_cells(img, px(s.collision_marks), half, np.array(COLLISION_RGB))
     if s.frontier_cells is not None and len(s.frontier_cells.xy):
-        cells = px(s.frontier_cells.xy)
-        for (x, y), rgb in zip(cells, s.frontier_cells.rgb):
-            img[max(y - half, 0): y + half + 1, max(x - half, 0): x + half + 1] = rgb
+        _paint_cells(img, px(s.frontier_cells.xy), half, s.frontier_cells.rgb)
     if s.trajectory is not None and len(s.trajectory) > 1:
         cv2.polylines(img, [px(s.trajectory)], False, AGENT_RGB, max(1, int(k)), cv2.LINE_AA)
     placed: list[tuple[int, int, int, int]] = []
@@ -483,6 +480,18 @@ def _map_panel(ep: RecordedEpisode, s: _Step, lut: np.ndarray, size: tuple[int, 
         cv2.circle(img, (int(ax), int(ay)), max(4, int(2 * k)), AGENT_RGB, -1, cv2.LINE_AA)
     _colour_bar(img)
     return img
+
+
+def _paint_cells(img: np.ndarray, centres: np.ndarray, half: int, rgb: np.ndarray) -> None:
+    """A square of side ``2 half + 1`` pixels round each centre (x, y), in one colour or one per cell;
+    squares cut at the panel's edge. Vectorised: a long episode lays a thousand collision cells."""
+    h, w = img.shape[:2]
+    d = np.arange(-half, half + 1)
+    ys = (centres[:, 1, None, None] + d[None, :, None]).repeat(len(d), axis=2)
+    xs = (centres[:, 0, None, None] + d[None, None, :]).repeat(len(d), axis=1)
+    colours = np.broadcast_to(np.asarray(rgb, np.uint8).reshape(-1, 1, 1, 3), (len(centres), len(d), len(d), 3))
+    inside = (ys >= 0) & (ys < h) & (xs >= 0) & (xs < w)
+    img[ys[inside], xs[inside]] = colours[inside]
 
 
 def _place_label(img: np.ndarray, text: str, at: tuple[int, int], placed: list, rgb) -> tuple[int, int, int, int]:
