@@ -15,7 +15,7 @@ from l3mvn.agent import MapAgent
 from l3mvn.agent.teleop import TeleopAgent
 from l3mvn.config import Config, PolicyConfig
 from l3mvn.errors import L3MVNError
-from l3mvn.policies.global_policies import GLOBAL_POLICIES
+from l3mvn.policies.global_policies import GLOBAL_POLICIES, RandomSample
 from l3mvn.policies.language_policy import LanguageFrontierPolicy
 from l3mvn.policies.oracle import FrontierOracle, OraclePolicy, RandomWalkPolicy
 from l3mvn.sim.simulator import BuiltinSimulator
@@ -71,6 +71,8 @@ def make_policy(name: str, env: BuiltinSimulator, task: ObjectNavTask, config: C
                                                config.frontiers.cu_lambda)
     elif name == "oracle-frontier":
         global_policy = FrontierOracle(task)
+    elif name == RandomSample.name:
+        global_policy = RandomSample(config.planner.obstacle_dilation_cells)
     else:
         global_policy = GLOBAL_POLICIES[name]()
     return MapAgent(global_policy, env.categories, config, seed)

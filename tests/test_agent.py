@@ -153,7 +153,8 @@ def test_reached_frontiers_are_not_chosen_again(env):
 def test_random_sample_keeps_its_goal_until_reached_while_frontier_policies_reselect(env):
     from l3mvn.policies.global_policies import RandomSample
 
-    agent = MapAgent(RandomSample(), env.categories, _tree(env))
+    tree = _tree(env)
+    agent = MapAgent(RandomSample(tree.planner.obstacle_dilation_cells), env.categories, tree)
     episode = _episode()
     obs = env.reset(episode)
     agent.reset(episode)

@@ -21,6 +21,7 @@ import numpy as np
 
 from l3mvn.config import PlannerConfig
 from l3mvn.errors import L3MVNError
+from l3mvn.mapping import disk
 from l3mvn.planning.collisions import CollisionTracker
 from l3mvn.planning.fmm import GeodesicField, Window, distance_field
 from l3mvn.planning.steering import TIE_WEIGHT, Steering
@@ -49,10 +50,10 @@ class GoalFields:
         self.steering = steering
         self.lookahead_cells = steering.lookahead_cells
         self.goal_dilation_cells = int(round(cfg.goal_dilation_m / resolution_m))
-        self._obstacle_kernel = _disk(cfg.obstacle_dilation_cells)
-        self._goal_kernels = {self.goal_dilation_cells: _disk(self.goal_dilation_cells)}
+        self._obstacle_kernel = disk(cfg.obstacle_dilation_cells)
+        self._goal_kernels = {self.goal_dilation_cells: disk(self.goal_dilation_cells)}
         escape = cfg.obstacle_dilation_cells + 1
-        self._escape_offsets = np.argwhere(_disk(escape) > 0) - escape
+        self._escape_offsets = np.argwhere(disk(escape) > 0) - escape
         self.reset(collisions)
 
     def reset(self, collisions: CollisionTracker) -> None:
@@ -190,7 +191,7 @@ class GoalFields:
         straight = math.dist(agent, nearest_goal) * res
         margin = max(cfg.window_margin_m, _margin_for(straight + lookahead + _slack(straight), straight))
         pad = dilation + 1
-        kernel = self._goal_kernels.setdefault(dilation, _disk(dilation))
+        kernel = self._goal_kernels.setdefault(dilation, disk(dilation))
         whole = self._whole_window(obstacle, rows, cols)
         while True:
             window = whole
@@ -330,11 +331,6 @@ def _margin_for(path_m: float, straight_m: float) -> float:
 
 def _area(window: Window) -> int:
     return window.shape[0] * window.shape[1]
-
-
-def _disk(radius: int) -> np.ndarray:
-    r = np.arange(-radius, radius + 1)
-    return (r[:, None] ** 2 + r[None, :] ** 2 <= radius * radius).astype(np.uint8)
 
 
 def _extent(mask: np.ndarray | None) -> tuple[int, int, int, int] | None:
