@@ -228,6 +228,33 @@ def test_a_failed_step_towards_the_target_leaves_the_passage_beside_it_open():
     assert planner.collision_map[59:62, 33].all() and not planner.collision_map[[58, 62], 33].any()
 
 
+def test_marks_that_force_a_detour_to_the_target_are_cleared_a_few_times_an_episode():
+    """Forkland/0/1 at 480x640: beside the toilet the floor is a passage as wide as the agent, which
+    even a 1-cell mark closes; the way round is 5 m longer. Approaching the target the marks are
+    cleared (``target_mark_clears`` times), exploring they stay; cleared collisions still count as
+    collisions for the stuck signal."""
+    obstacle = _room()
+    obstacle[:, 33] = True
+    obstacle[59:62, 33] = False  # one traversable row (60) once the wall grows by a cell
+    obstacle[105:112, 33] = False  # the way round
+    cfg = PlannerConfig(stuck_collisions=PlannerConfig().target_mark_clears + 1)
+    straight = LocalPlanner(cfg, RES).plan(obstacle, (60, 30), 0.0, (60, 100), target=True).distance_to_goal_m
+    for target in (False, True):
+        planner = LocalPlanner(cfg, RES)
+        planner.plan(obstacle, (60, 30), 0.0, (60, 100), target=target)
+        cleared = []
+        for _ in range(cfg.target_mark_clears + 1):
+            plan = planner.plan(obstacle, (60, 30), 0.0, (60, 100), last_move_m=0.0, target=target)
+            assert plan.collided
+            cleared.append(plan.marks_cleared)
+            if plan.marks_cleared:
+                assert not planner.collision_map.any() and plan.distance_to_goal_m == pytest.approx(straight)
+            else:
+                assert planner.collision_map[60, 33] and plan.distance_to_goal_m > straight + cfg.target_mark_detour_m
+        assert cleared == ([True] * cfg.target_mark_clears + [False] if target else [False] * len(cleared))
+    assert plan.stuck
+
+
 def test_the_marked_cells_are_listed_for_views_as_arrays_that_never_change_under_a_reader():
     planner = _planner()
     planner.plan(_room(), (60, 30), 0.0, (60, 100))

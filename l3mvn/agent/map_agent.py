@@ -179,6 +179,9 @@ class MapAgent:
                 reason = f"{int(target.sum())} {self.goal} cell(s) still too few up close: looking from another side"
                 plan = self._plan(sem_map, goal, kind, None)
         t["planning"] = time.perf_counter()
+        if plan.marks_cleared:
+            reason = (f"{reason}; collision marks cleared: they lengthened the way by over "
+                      f"{self.config.planner.target_mark_detour_m:g} m")
         self.stuck = plan.stuck
         action = plan.action
         self._unreachable = 0 if plan.reachable else self._unreachable + 1

@@ -33,6 +33,13 @@ class PlannerConfig:
     # Exploring keeps the wide marks: narrow ones there cost 0.025-0.04 SR in repeated collisions.
     collision_mark_target_width_cells: int = 1
     collision_mark_target_max_width_cells: int = 5
+    # Even a 1-cell mark closes a passage only as wide as the agent (a toilet's floor the navmesh
+    # eroded to 0.2 m): at 480x640 the plan then led 7 m round through the unknown, 1.2 m from the
+    # toilet, in Forkland/0/1 (lost by frontier, l3mvn-zs and l3mvn-ff). Approaching the target, marks
+    # that lengthen the way to it by more than this are cleared, at most this many times an episode
+    # (a real obstacle is bumped into again and marked again; the stuck signal still counts).
+    target_mark_detour_m: float = 2.0
+    target_mark_clears: int = 3
     # Stuck: this many collisions, or less than this displacement, within the last window of steps.
     stuck_window_steps: int = 50
     stuck_collisions: int = 20
@@ -45,13 +52,13 @@ class PlannerConfig:
             "goal_dilation_m", "stg_lookahead_m", "turn_threshold_deg",
             "collision_threshold_m", "collision_mark_offset_cells", "collision_mark_length_cells",
             "collision_mark_width_cells", "collision_mark_target_width_cells",
-            "stuck_window_steps", "stuck_collisions", "window_margin_m",
+            "stuck_window_steps", "stuck_collisions", "window_margin_m", "target_mark_detour_m",
         )
         for name in positive:
             if getattr(self, name) <= 0:
                 raise L3MVNError(f"{name} must be positive, got {getattr(self, name)}")
-        if self.obstacle_dilation_cells < 0 or self.stuck_min_displacement_m < 0:
-            raise L3MVNError("obstacle_dilation_cells and stuck_min_displacement_m must be >= 0")
+        if self.obstacle_dilation_cells < 0 or self.stuck_min_displacement_m < 0 or self.target_mark_clears < 0:
+            raise L3MVNError("obstacle_dilation_cells, stuck_min_displacement_m and target_mark_clears must be >= 0")
         for kind in ("", "target_"):
             first, widest = f"collision_mark_{kind}width_cells", f"collision_mark_{kind}max_width_cells"
             if getattr(self, widest) < getattr(self, first):

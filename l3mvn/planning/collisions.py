@@ -38,12 +38,16 @@ class CollisionTracker:
 
     def clear(self) -> None:
         """Forget the marks and the history (an agent escaping a trap it marked itself)."""
-        if self.map is not None:
-            self.map.fill(False)
-        self._cells = np.zeros((0, 2), dtype=np.int32)
+        self.clear_marks()
         self._consecutive_collisions = 0
         self._recent_collisions.clear()
         self._recent_cells.clear()
+
+    def clear_marks(self) -> None:
+        """Forget the marks only: the collisions still count towards the stuck signal."""
+        if self.map is not None:
+            self.map.fill(False)
+        self._cells = np.zeros((0, 2), dtype=np.int32)
 
     def record(self, agent: tuple[int, int], heading: float, last_move_m: float | None, *,
                target: bool = False) -> bool:

@@ -123,13 +123,29 @@ class GoalFields:
         limit = math.inf if max_distance_m is None else float(max_distance_m)
         return GeodesicField(values, window, obstacle.shape, limit)
 
-    def _traversible(self, obstacle: np.ndarray, window: Window) -> np.ndarray:
-        """Not (dilated obstacle) and not collision, over ``window`` (obstacles just outside count)."""
+    def distance_without_marks(
+        self,
+        obstacle: np.ndarray,
+        agent: tuple[int, int],
+        goal_rows: np.ndarray,
+        goal_cols: np.ndarray,
+        nearest_goal: tuple[int, int],
+        dilation: int,
+    ) -> float:
+        """The agent's FMM distance to the dilated goal as if no collision mark had been laid (not
+        cached: asked only while marks stand between the agent and its target)."""
+        field, _, _ = self._goal_field(obstacle, agent, goal_rows, goal_cols, nearest_goal, True, dilation,
+                                       marks=False)
+        return float(field.at(*agent))
+
+    def _traversible(self, obstacle: np.ndarray, window: Window, marks: bool = True) -> np.ndarray:
+        """Not (dilated obstacle) and, with ``marks``, not collision, over ``window`` (obstacles just
+        outside count)."""
         pad = window.grown(self.cfg.obstacle_dilation_cells, obstacle.shape)
         crop = obstacle[pad.slices].view(np.uint8)
         dilated = cv2.dilate(crop, self._obstacle_kernel) if self._obstacle_kernel.size > 1 else crop
         inner = dilated[window.r0 - pad.r0 : window.r1 - pad.r0, window.c0 - pad.c0 : window.c1 - pad.c0]
-        return (inner == 0) & ~self._collisions.map[window.slices]
+        return (inner == 0) & ~self._collisions.map[window.slices] if marks else inner == 0
 
     def _with_escape(
         self, trav: np.ndarray, obstacle: np.ndarray, window: Window, agent: tuple[int, int]
@@ -174,6 +190,7 @@ class GoalFields:
         nearest_goal: tuple[int, int],
         escape: bool,
         dilation: int,
+        marks: bool = True,
     ) -> tuple[GeodesicField, np.ndarray, np.ndarray]:
         """FMM to the dilated goal on the smallest window whose answer around the agent is exact.
 
@@ -198,7 +215,7 @@ class GoalFields:
             if math.isfinite(margin):
                 grown = Window.bounding(rows, cols, pad + int(math.ceil(margin / res)), obstacle.shape)
                 window = grown if _area(grown) < _area(whole) else whole
-            trav = self._traversible(obstacle, window)
+            trav = self._traversible(obstacle, window, marks)
             if escape:
                 trav = self._with_escape(trav, obstacle, window, agent)
             goal_mask = np.zeros(window.shape, dtype=np.uint8)

@@ -33,6 +33,8 @@ class Plan:
     when unreachable (then ``short_term_goal`` leads to the reachable cell nearest the goal).
     field: the distance field the step followed (to the goal, or to that fallback cell).
     replanned: whether this step ran FMM (False when the previous field was still valid).
+    marks_cleared: approaching the target, the collision marks lengthened the way to it by more
+    than ``target_mark_detour_m`` and were cleared this step (``LocalPlanner.plan``).
     """
 
     action: Action
@@ -44,6 +46,7 @@ class Plan:
     stuck: bool
     replanned: bool
     field: GeodesicField
+    marks_cleared: bool = False  # collision marks that made a detour to the target were just cleared
 
 
 class LocalPlanner:
@@ -63,11 +66,13 @@ class LocalPlanner:
         self._fields = GoalFields(cfg, resolution_m, self._steering, self._collisions)
         self.goal_dilation_cells = self._fields.goal_dilation_cells
         self.lookahead_cells = self._steering.lookahead_cells
+        self._target_clears = 0  # clears of detour-making marks this episode (``target_mark_clears``)
 
     def reset(self) -> None:
         """Forget the collision map, the cached field and the stuck history (new episode)."""
         self._collisions = CollisionTracker(self.cfg, self.resolution_m)
         self._fields.reset(self._collisions)
+        self._target_clears = 0
 
     @property
     def fmm_runs(self) -> int:
@@ -126,6 +131,15 @@ class LocalPlanner:
         field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols, nearest_goal,
                                                             dilation)
         d_agent = float(field.at(*agent))
+        marks_cleared = target and self._marks_make_detour(obstacle, agent, goal_rows, goal_cols, nearest_goal,
+                                                           dilation, d_agent)
+        if marks_cleared:
+            self._collisions.clear_marks()
+            self._fields.forget()
+            self._target_clears += 1
+            field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols,
+                                                                nearest_goal, dilation)
+            d_agent = float(field.at(*agent))
         reachable = math.isfinite(d_agent)
         if not reachable:
             distance = math.inf
@@ -147,7 +161,16 @@ class LocalPlanner:
             stuck=self._collisions.stuck(agent),
             replanned=replanned,
             field=field,
+            marks_cleared=marks_cleared,
         )
+
+    def _marks_make_detour(self, obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, d_agent) -> bool:
+        """Whether the collision marks lengthen the way to the target by more than
+        ``target_mark_detour_m`` (or close it), with clears left this episode."""
+        if not len(self._collisions.cells) or self._target_clears >= self.cfg.target_mark_clears:
+            return False
+        free = self._fields.distance_without_marks(obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation)
+        return free + self.cfg.target_mark_detour_m < d_agent
 
     def distance_from_agent(
         self,
