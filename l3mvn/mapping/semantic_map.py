@@ -336,14 +336,12 @@ def _cell(dx: float, dy: float, resolution_m: float, size: int) -> tuple[int, in
 
 def _footprint_cells(cell: tuple[int, int], radius: int, size: int) -> tuple[np.ndarray, np.ndarray]:
     """Cells of a disk around ``cell``, clipped to the map."""
-    dr, dc = np.nonzero(disk(radius))
+    dr, dc = np.nonzero(_disk(radius))
     rr, cc = dr - radius + cell[0], dc - radius + cell[1]
     inside = (rr >= 0) & (rr < size) & (cc >= 0) & (cc < size)
     return rr[inside], cc[inside]
 
 
-def disk(radius: int) -> np.ndarray:
-    """A (2r+1, 2r+1) uint8 disk: the agent's footprint, and the kernel every obstacle dilation uses
-    (one shape, so the planner and the policies agree on which gaps the agent fits through)."""
+def _disk(radius: int) -> np.ndarray:
     yy, xx = np.ogrid[-radius : radius + 1, -radius : radius + 1]
-    return ((xx * xx + yy * yy) <= radius * radius).astype(np.uint8)
+    return (xx * xx + yy * yy) <= radius * radius

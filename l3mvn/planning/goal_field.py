@@ -21,7 +21,6 @@ import numpy as np
 
 from l3mvn.config import PlannerConfig
 from l3mvn.errors import L3MVNError
-from l3mvn.mapping import disk
 from l3mvn.planning.collisions import CollisionTracker
 from l3mvn.planning.fmm import GeodesicField, Window, distance_field
 from l3mvn.planning.steering import TIE_WEIGHT, Steering
@@ -348,6 +347,13 @@ def _margin_for(path_m: float, straight_m: float) -> float:
 
 def _area(window: Window) -> int:
     return window.shape[0] * window.shape[1]
+
+
+def disk(radius: int) -> np.ndarray:
+    """The (2r+1, 2r+1) uint8 disk the planner grows obstacles with: policies that judge where the
+    agent fits through use the same one."""
+    r = np.arange(-radius, radius + 1)
+    return (r[:, None] ** 2 + r[None, :] ** 2 <= radius * radius).astype(np.uint8)
 
 
 def _extent(mask: np.ndarray | None) -> tuple[int, int, int, int] | None:

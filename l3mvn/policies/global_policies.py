@@ -14,8 +14,7 @@ import cv2
 import numpy as np
 
 from l3mvn.frontiers import Frontier, Fusion
-from l3mvn.mapping import disk
-from l3mvn.planning.fmm import distance_field
+from l3mvn.planning import disk, distance_field
 
 
 @dataclass(frozen=True)
