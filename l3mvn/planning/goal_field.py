@@ -73,17 +73,20 @@ class GoalFields:
         goal_cols: np.ndarray,
         nearest_goal: tuple[int, int],
         dilation: int,
+        marks: bool = True,
     ) -> tuple[GeodesicField, np.ndarray, tuple[int, int] | None, bool]:
         """(field, traversible, short-term goal if the cached field gave it, replanned) for the goal
-        dilated by ``dilation`` cells."""
+        dilated by ``dilation`` cells. Without ``marks``: as if no collision mark had been laid
+        (never cached; asked only while marks stand between the agent and its target)."""
         key = (goal_rows.tobytes(), goal_cols.tobytes(), dilation)
-        reused = self._reusable(obstacle, agent, key, nearest_goal)
+        reused = self._reusable(obstacle, agent, key, nearest_goal) if marks else None
         if reused is not None:
             field, trav, stg = reused
             return field, trav, stg, False
-        escape = not self._base_free(obstacle, agent)
-        field, trav, sources = self._goal_field(obstacle, agent, goal_rows, goal_cols, nearest_goal, escape, dilation)
-        if not escape:
+        escape = not self._base_free(obstacle, agent, marks)
+        field, trav, sources = self._goal_field(obstacle, agent, goal_rows, goal_cols, nearest_goal, escape, dilation,
+                                                marks)
+        if marks and not escape:
             self._cache = _GoalField(key, trav, sources, field)
         return field, trav, None, True
 
@@ -122,21 +125,6 @@ class GoalFields:
         limit = math.inf if max_distance_m is None else float(max_distance_m)
         return GeodesicField(values, window, obstacle.shape, limit)
 
-    def distance_without_marks(
-        self,
-        obstacle: np.ndarray,
-        agent: tuple[int, int],
-        goal_rows: np.ndarray,
-        goal_cols: np.ndarray,
-        nearest_goal: tuple[int, int],
-        dilation: int,
-    ) -> float:
-        """The agent's FMM distance to the dilated goal as if no collision mark had been laid (not
-        cached: asked only while marks stand between the agent and its target)."""
-        field, _, _ = self._goal_field(obstacle, agent, goal_rows, goal_cols, nearest_goal, True, dilation,
-                                       marks=False)
-        return float(field.at(*agent))
-
     def _traversible(self, obstacle: np.ndarray, window: Window, marks: bool = True) -> np.ndarray:
         """Not (dilated obstacle) and, with ``marks``, not collision, over ``window`` (obstacles just
         outside count)."""
@@ -160,8 +148,8 @@ class GoalFields:
         out[agent[0] - window.r0, agent[1] - window.c0] = True
         return out
 
-    def _base_free(self, obstacle: np.ndarray, agent: tuple[int, int]) -> bool:
-        return bool(self._traversible(obstacle, Window(agent[0], agent[1], agent[0] + 1, agent[1] + 1))[0, 0])
+    def _base_free(self, obstacle: np.ndarray, agent: tuple[int, int], marks: bool = True) -> bool:
+        return bool(self._traversible(obstacle, Window(agent[0], agent[1], agent[0] + 1, agent[1] + 1), marks)[0, 0])
 
     def _exact(self, window: Window, obstacle: np.ndarray) -> bool:
         """Whether every obstacle (dilated) and collision mark lies strictly inside the window.

@@ -131,8 +131,9 @@ class LocalPlanner:
         field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols, nearest_goal,
                                                             dilation)
         d_agent = float(field.at(*agent))
-        marks_cleared = target and self._marks_make_detour(obstacle, agent, goal_rows, goal_cols, nearest_goal,
-                                                           dilation, d_agent)
+        # Only a replanned field can hold new marks across the way (a reused one provably does not).
+        marks_cleared = target and replanned and self._marks_make_detour(obstacle, agent, goal_rows, goal_cols,
+                                                                         nearest_goal, dilation, d_agent)
         if marks_cleared:
             self._collisions.clear_marks()
             self._fields.forget()
@@ -169,8 +170,8 @@ class LocalPlanner:
         ``target_mark_detour_m`` (or close it), with clears left this episode."""
         if not len(self._collisions.cells) or self._target_clears >= self.cfg.target_mark_clears:
             return False
-        free = self._fields.distance_without_marks(obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation)
-        return free + self.cfg.target_mark_detour_m < d_agent
+        free, _, _, _ = self._fields.field_to(obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, marks=False)
+        return float(free.at(*agent)) + self.cfg.target_mark_detour_m < d_agent
 
     def distance_from_agent(
         self,
