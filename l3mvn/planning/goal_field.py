@@ -7,8 +7,9 @@ cell freed, and no newly blocked cell on either path (see ``_reusable``); about 
 replans while a house is being mapped. The window is only as large as the agent, the goal and a
 margin; a path that leaves it is longer than the reflection bound ``_exit_bound_m``, and the window
 grows until the agent's distance is safely below it (or holds every obstacle: then it is exact).
-Unknown cells count as free (optimistic planning, as SemExp); obstacles are dilated by the agent
-radius; cells where a forward step failed (``CollisionTracker``) are blocked.
+Unknown cells count as free (optimistic planning, as SemExp); obstacles are dilated by
+``obstacle_dilation_cells``, and the way to a goal first by ``clearance_cells`` more (``field_to``);
+cells where a forward step failed (``CollisionTracker``) are blocked.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ _SLACK_REL = 0.03
 
 @dataclass
 class _GoalField:
-    goal_key: tuple[bytes, bytes]
+    goal_key: tuple
     traversible: np.ndarray
     sources: np.ndarray
     field: GeodesicField
@@ -49,21 +50,25 @@ class GoalFields:
         self.steering = steering
         self.lookahead_cells = steering.lookahead_cells
         self.goal_dilation_cells = int(round(cfg.goal_dilation_m / resolution_m))
-        self._obstacle_kernel = disk(cfg.obstacle_dilation_cells)
+        # Obstacle growth in cells: ``False`` the body's (frontier costs, fallbacks), ``True`` the
+        # body's plus the clearance the way to a goal keeps where the floor allows.
+        self._growth = {False: cfg.obstacle_dilation_cells, True: cfg.obstacle_dilation_cells + cfg.clearance_cells}
+        self._obstacle_kernels = {wide: disk(r) for wide, r in self._growth.items()}
         self._goal_kernels = {self.goal_dilation_cells: disk(self.goal_dilation_cells)}
-        escape = cfg.obstacle_dilation_cells + 1
-        self._escape_offsets = np.argwhere(disk(escape) > 0) - escape
+        self._escape_offsets = {wide: np.argwhere(disk(r + 1) > 0) - (r + 1) for wide, r in self._growth.items()}
         self.reset(collisions)
 
     def reset(self, collisions: CollisionTracker) -> None:
         """A new episode: its collision marks, no cached field, no marches counted."""
         self._collisions = collisions
-        self._cache: _GoalField | None = None
+        self._cache: dict[bool, _GoalField] = {}
+        self._narrow_goal: tuple | None = None
         self.fmm_runs = 0
 
     def forget(self) -> None:
-        """Drop the cached goal field (the collision marks it was built on were cleared)."""
-        self._cache = None
+        """Drop the cached goal fields (the collision marks they were built on were cleared)."""
+        self._cache = {}
+        self._narrow_goal = None
 
     def field_to(
         self,
@@ -77,17 +82,40 @@ class GoalFields:
     ) -> tuple[GeodesicField, np.ndarray, tuple[int, int] | None, bool]:
         """(field, traversible, short-term goal if the cached field gave it, replanned) for the goal
         dilated by ``dilation`` cells. Without ``marks``: as if no collision mark had been laid
-        (never cached; asked only while marks stand between the agent and its target)."""
-        key = (goal_rows.tobytes(), goal_cols.tobytes(), dilation)
-        reused = self._reusable(obstacle, agent, key, nearest_goal) if marks else None
+        (never cached; asked only while marks stand between the agent and its target).
+
+        The way keeps ``clearance_cells`` more from obstacles (a path along the body's own margin
+        grazes walls at every heading error) unless that closes it or lengthens it by more than
+        ``clearance_detour_m``: then the body's margin alone is used until the goal changes or the
+        marks are cleared. The comparison is made whenever the wide field is replanned."""
+        goal = (goal_rows.tobytes(), goal_cols.tobytes(), dilation)
+        args = (obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, marks)
+        if self.cfg.clearance_cells == 0 or goal == self._narrow_goal:
+            return self._field_to(*args, False)
+        wide = self._field_to(*args, True)
+        if not wide[3]:
+            return wide
+        narrow = self._field_to(*args, False)
+        d_wide, d_narrow = float(wide[0].at(*agent)), float(narrow[0].at(*agent))
+        if math.isfinite(d_wide) and not d_narrow + self.cfg.clearance_detour_m < d_wide:
+            return wide
+        if marks:
+            self._narrow_goal = goal
+        return narrow[0], narrow[1], narrow[2], True
+
+    def _field_to(self, obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, marks, wide):
+        """``field_to`` at one obstacle growth (``wide``: with the clearance); each growth keeps its
+        own cached field, so comparing the two does not replan both every step."""
+        key = (goal_rows.tobytes(), goal_cols.tobytes(), dilation, wide)
+        reused = self._reusable(obstacle, agent, key, nearest_goal, wide) if marks else None
         if reused is not None:
             field, trav, stg = reused
             return field, trav, stg, False
-        escape = not self._base_free(obstacle, agent, marks)
+        escape = not self._base_free(obstacle, agent, marks, wide)
         field, trav, sources = self._goal_field(obstacle, agent, goal_rows, goal_cols, nearest_goal, escape, dilation,
-                                                marks)
+                                                marks, wide)
         if marks and not escape:
-            self._cache = _GoalField(key, trav, sources, field)
+            self._cache[wide] = _GoalField(key, trav, sources, field)
         return field, trav, None, True
 
     def distance_from_agent(
@@ -125,21 +153,22 @@ class GoalFields:
         limit = math.inf if max_distance_m is None else float(max_distance_m)
         return GeodesicField(values, window, obstacle.shape, limit)
 
-    def _traversible(self, obstacle: np.ndarray, window: Window, marks: bool = True) -> np.ndarray:
+    def _traversible(self, obstacle: np.ndarray, window: Window, marks: bool = True, wide: bool = False) -> np.ndarray:
         """Not (dilated obstacle) and, with ``marks``, not collision, over ``window`` (obstacles just
-        outside count)."""
-        pad = window.grown(self.cfg.obstacle_dilation_cells, obstacle.shape)
+        outside count); ``wide``: grown by the clearance too."""
+        pad = window.grown(self._growth[wide], obstacle.shape)
         crop = obstacle[pad.slices].view(np.uint8)
-        dilated = cv2.dilate(crop, self._obstacle_kernel) if self._obstacle_kernel.size > 1 else crop
+        kernel = self._obstacle_kernels[wide]
+        dilated = cv2.dilate(crop, kernel) if kernel.size > 1 else crop
         inner = dilated[window.r0 - pad.r0 : window.r1 - pad.r0, window.c0 - pad.c0 : window.c1 - pad.c0]
         return (inner == 0) & ~self._collisions.map[window.slices] if marks else inner == 0
 
     def _with_escape(
-        self, trav: np.ndarray, obstacle: np.ndarray, window: Window, agent: tuple[int, int]
+        self, trav: np.ndarray, obstacle: np.ndarray, window: Window, agent: tuple[int, int], wide: bool = False
     ) -> np.ndarray:
         """Open the undilated free cells around the agent, so dilation cannot trap it in place."""
-        rows = self._escape_offsets[:, 0] + agent[0]
-        cols = self._escape_offsets[:, 1] + agent[1]
+        rows = self._escape_offsets[wide][:, 0] + agent[0]
+        cols = self._escape_offsets[wide][:, 1] + agent[1]
         ok = window.inside(rows, cols)
         rows, cols = rows[ok], cols[ok]
         free = ~obstacle[rows, cols] & ~self._collisions.map[rows, cols]
@@ -148,15 +177,16 @@ class GoalFields:
         out[agent[0] - window.r0, agent[1] - window.c0] = True
         return out
 
-    def _base_free(self, obstacle: np.ndarray, agent: tuple[int, int], marks: bool = True) -> bool:
-        return bool(self._traversible(obstacle, Window(agent[0], agent[1], agent[0] + 1, agent[1] + 1), marks)[0, 0])
+    def _base_free(self, obstacle: np.ndarray, agent: tuple[int, int], marks: bool = True, wide: bool = False) -> bool:
+        cell = Window(agent[0], agent[1], agent[0] + 1, agent[1] + 1)
+        return bool(self._traversible(obstacle, cell, marks, wide)[0, 0])
 
-    def _exact(self, window: Window, obstacle: np.ndarray) -> bool:
+    def _exact(self, window: Window, obstacle: np.ndarray, wide: bool = False) -> bool:
         """Whether every obstacle (dilated) and collision mark lies strictly inside the window.
 
         Then the outside is free, and clamping any path to the window never lengthens it.
         """
-        grow = self.cfg.obstacle_dilation_cells + 1
+        grow = self._growth[wide] + 1
         for extent in (_extent(obstacle), _extent(self._collisions.map)):
             if extent is None:
                 continue
@@ -178,6 +208,7 @@ class GoalFields:
         escape: bool,
         dilation: int,
         marks: bool = True,
+        wide: bool = False,
     ) -> tuple[GeodesicField, np.ndarray, np.ndarray]:
         """FMM to the dilated goal on the smallest window whose answer around the agent is exact.
 
@@ -202,13 +233,13 @@ class GoalFields:
             if math.isfinite(margin):
                 grown = Window.bounding(rows, cols, pad + int(math.ceil(margin / res)), obstacle.shape)
                 window = grown if _area(grown) < _area(whole) else whole
-            trav = self._traversible(obstacle, window, marks)
+            trav = self._traversible(obstacle, window, marks, wide)
             if escape:
-                trav = self._with_escape(trav, obstacle, window, agent)
+                trav = self._with_escape(trav, obstacle, window, agent, wide)
             goal_mask = np.zeros(window.shape, dtype=np.uint8)
             goal_mask[goal_rows - window.r0, goal_cols - window.c0] = 1
             sources = (cv2.dilate(goal_mask, kernel) > 0) & trav
-            exact = window == whole or self._exact(window, obstacle)
+            exact = window == whole or self._exact(window, obstacle, wide)
             bound = math.inf if exact else self._exit_bound_m(agent, window, sources, obstacle.shape)
             values = distance_field(trav, sources, resolution_m=res, limit_m=None if exact else bound)
             self.fmm_runs += 1
@@ -226,15 +257,16 @@ class GoalFields:
             if extent is not None:
                 rows.append(np.array(extent[:2]))
                 cols.append(np.array(extent[2:]))
-        margin = max(self.cfg.obstacle_dilation_cells, self.goal_dilation_cells) + 2
+        margin = max(self._growth[True], self.goal_dilation_cells) + 2
         return Window.bounding(np.concatenate(rows), np.concatenate(cols), margin, obstacle.shape)
 
     def _reusable(
         self,
         obstacle: np.ndarray,
         agent: tuple[int, int],
-        goal_key: tuple[bytes, bytes],
+        goal_key: tuple,
         nearest_goal: tuple[int, int],
+        wide: bool = False,
     ) -> tuple[GeodesicField, np.ndarray, tuple[int, int]] | None:
         """The cached goal field, the current traversible and the short-term goal, if still valid.
 
@@ -243,14 +275,14 @@ class GoalFields:
         cell ``b``, which needs ``|x - b| + d(b) <= d(x)``: checked for the agent and for the
         chosen short-term goal (other candidates could only be under-estimated, and still lose).
         """
-        cache = self._cache
+        cache = self._cache.get(wide)
         if cache is None or cache.goal_key != goal_key:
             return None
         field = cache.field
         window = field.window
         if not window.inside(agent[0], agent[1]):
             return None
-        trav = self._traversible(obstacle, window)
+        trav = self._traversible(obstacle, window, wide=wide)
         local = (agent[0] - window.r0, agent[1] - window.c0)
         if not trav[local] or (trav & ~cache.traversible).any():
             return None
@@ -258,7 +290,7 @@ class GoalFields:
         if not math.isfinite(d_agent):
             return None
         res = self.resolution_m
-        if not self._exact(window, obstacle):
+        if not self._exact(window, obstacle, wide):
             bound = min(field.limit_m, self._exit_bound_m(agent, window, cache.sources, obstacle.shape))
             if d_agent + self.lookahead_cells * res + _slack(d_agent) > bound:
                 return None
