@@ -107,6 +107,31 @@ def test_a_single_noisy_goal_cell_is_looked_at_from_other_sides_then_set_aside(e
     assert agent.act(env.step(decisions[-1].action)).goal_kind not in ("candidate", "viewpoint")
 
 
+def test_a_candidate_the_agent_comes_no_nearer_to_is_looked_at_from_elsewhere_then_set_aside(env):
+    """Lindenwood/0/3: two toilet cells seen, and 440 steps spent circling a bathroom the navmesh cut
+    short. Here no step can bring the agent the (impossible) required progress closer: after its
+    patience it tries another side, then sets the cells aside, instead of approaching for ever."""
+    agent = _agent(env, look_around_steps=0, goal_patience_steps=3, goal_progress_m=50.0)
+    episode = _episode("toilet")
+    obs = env.reset(episode)
+    agent.reset(episode)
+    agent.act(obs)
+    row, col = agent._mapper.map.agent_cell
+    agent._mapper.map.category("toilet")[row, col + 60] = True  # one cell 3 m east, in the unknown
+    decisions = []
+    for _ in range(60):
+        d = agent.act(obs)
+        assert d.action != Action.STOP  # the previous build walked on until it saw the real toilet
+        decisions.append(d)
+        if "set aside" in d.reason:
+            break
+        obs = env.step(d.action)
+    kinds = [d.goal_kind for d in decisions]
+    assert kinds[0] == "candidate" and "set aside" in decisions[-1].reason
+    assert any("no nearer in 3 steps" in d.reason for d in decisions)
+    assert len(decisions) < 30
+
+
 def test_manual_goal_is_followed_recorded_and_cleared_once_reached(env):
     agent = _agent(env, look_around_steps=0)
     episode = _episode("toilet")

@@ -178,6 +178,19 @@ class MapAgent:
                 goal, kind = view, GoalKind.VIEWPOINT
                 reason = f"{int(target.sum())} {self.goal} cell(s) still too few up close: looking from another side"
                 plan = self._plan(sem_map, goal, kind, None)
+        elif kind == GoalKind.CANDIDATE and self._stalled(mask_centre(target), plan):
+            # No nearer for a while, though the plan says it can be reached (Lindenwood/0/3: 440
+            # steps round a bathroom the navmesh cut short): look from another side, or explore on.
+            patience = self.cfg.goal_patience_steps
+            if len(search.views) < self.cfg.candidate_views \
+                    and (view := search.pick_viewpoint(sem_map, target, self.planner)) is not None:
+                goal, kind = view, GoalKind.VIEWPOINT
+                reason = f"{reason}; no nearer in {patience} steps: looking from another side"
+                plan = self._plan(sem_map, goal, kind, None)
+            else:
+                search.set_aside(target)
+                explore.force()
+                reason = f"{self.goal} cells no nearer in {patience} steps from {len(search.views) + 1} views: set aside"
         t["planning"] = time.perf_counter()
         if plan.marks_cleared:
             reason = (f"{reason}; collision marks cleared: they lengthened the way by over "
