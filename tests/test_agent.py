@@ -83,51 +83,43 @@ def test_look_around_comes_first_when_the_target_is_not_in_view(env):
     assert events[agent.cfg.look_around_steps][0].decision.goal_kind != "look-around"
 
 
-def test_a_single_noisy_goal_cell_is_looked_at_from_other_sides_then_set_aside(env):
-    agent = _agent(env, look_around_steps=0)
-    episode = _episode("toilet")  # in the other room: not seen from the start
+def _until_set_aside(env, agent, offset_cells: int, max_steps: int):
+    """Inject one toilet cell ``offset_cells`` east of the agent (the toilet itself is in the other
+    room, out of sight) and run until the agent sets goal cells aside; the agent never stops."""
+    episode = _episode("toilet")
     obs = env.reset(episode)
     agent.reset(episode)
     agent.act(obs)
     row, col = agent._mapper.map.agent_cell
     noise = agent._mapper.map.category("toilet")
     assert not noise.any()
-    noise[row, col + 3] = True  # one cell, 15 cm away: well inside the stop distance
+    noise[row, col + offset_cells] = True
     decisions = []
-    for _ in range(120):
+    for _ in range(max_steps):
         d = agent.act(obs)
         assert d.action != Action.STOP
         decisions.append(d)
         if "set aside" in d.reason:
             break
         obs = env.step(d.action)
-    kinds = [d.goal_kind for d in decisions]
-    assert kinds[0] == "candidate" and "set aside" in decisions[-1].reason
-    assert "viewpoint" in kinds  # looked at from another side before it was dropped
+    assert decisions[0].goal_kind == "candidate" and "set aside" in decisions[-1].reason
+    return decisions, obs
+
+
+def test_a_single_noisy_goal_cell_is_looked_at_from_other_sides_then_set_aside(env):
+    agent = _agent(env, look_around_steps=0)
+    decisions, obs = _until_set_aside(env, agent, 3, 120)  # 15 cm away: well inside the stop distance
+    assert "viewpoint" in [d.goal_kind for d in decisions]  # looked at from another side before it was dropped
     assert agent.act(env.step(decisions[-1].action)).goal_kind not in ("candidate", "viewpoint")
 
 
 def test_a_candidate_the_agent_comes_no_nearer_to_is_looked_at_from_elsewhere_then_set_aside(env):
     """Lindenwood/0/3: two toilet cells seen, and 440 steps spent circling a bathroom the navmesh cut
     short. Here no step can bring the agent the (impossible) required progress closer: after its
-    patience it tries another side, then sets the cells aside, instead of approaching for ever."""
+    patience it tries another side, then sets the cells aside, instead of approaching for ever (the
+    previous build walked on until it saw the real toilet and stopped)."""
     agent = _agent(env, look_around_steps=0, goal_patience_steps=3, goal_progress_m=50.0)
-    episode = _episode("toilet")
-    obs = env.reset(episode)
-    agent.reset(episode)
-    agent.act(obs)
-    row, col = agent._mapper.map.agent_cell
-    agent._mapper.map.category("toilet")[row, col + 60] = True  # one cell 3 m east, in the unknown
-    decisions = []
-    for _ in range(60):
-        d = agent.act(obs)
-        assert d.action != Action.STOP  # the previous build walked on until it saw the real toilet
-        decisions.append(d)
-        if "set aside" in d.reason:
-            break
-        obs = env.step(d.action)
-    kinds = [d.goal_kind for d in decisions]
-    assert kinds[0] == "candidate" and "set aside" in decisions[-1].reason
+    decisions, _ = _until_set_aside(env, agent, 60, 60)  # 3 m east, in the unknown
     assert any("no nearer in 3 steps" in d.reason for d in decisions)
     assert len(decisions) < 30
 
