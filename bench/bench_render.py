@@ -16,7 +16,8 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from l3mvn.config import SimConfig
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap, disk
+from l3mvn.grid import disk
+from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
 from l3mvn.sim.render import Renderer
 from l3mvn.sim.simulator import BuiltinSimulator
 from l3mvn.types import Action, Episode, Pose

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap, disk
+from l3mvn.grid import disk
+from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")

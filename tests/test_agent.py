@@ -312,7 +312,8 @@ def _corridor_with_side_room(toilet=(slice(10, 20), slice(82, 92))):
     toilet stands in the corner beside the door: seen from the corridor only through the doorway."""
     from scipy import ndimage as ndi
 
-    from l3mvn.scenes.scene import SceneMap, disk
+    from l3mvn.grid import disk
+    from l3mvn.scenes.scene import SceneMap
 
     h, w = 80, 200
     nav = np.zeros((h, w), bool)

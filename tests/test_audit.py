@@ -14,7 +14,8 @@ from l3mvn.cli import main
 from l3mvn.config import Config
 from l3mvn.eval.audit import REASONS, AuditConfig, FloorAuditor, audit_floor, audit_split
 from l3mvn.task.regions import footprint_region, goal_region
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap, disk
+from l3mvn.grid import disk
+from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
 from l3mvn.sim.world import World, build_world
 
 from conftest import draw_two_room_house

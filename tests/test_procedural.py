@@ -20,7 +20,8 @@ from l3mvn.scenes.room_contents import (
     ROOM_CONTENTS_PATH, build_room_contents, category_of, dump_room_contents, load_room_contents,
     room_categories,
 )
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, GOAL_CATEGORIES, disk
+from l3mvn.grid import disk
+from l3mvn.scenes.scene import GIBSON_CATEGORIES, GOAL_CATEGORIES
 
 SEEDS = range(30)
 RADIUS_CELLS = 4  # SimConfig.agent_radius_m = 0.18 m on 5 cm cells

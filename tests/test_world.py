@@ -7,7 +7,8 @@ import pytest
 from scipy import ndimage as ndi
 
 from l3mvn.config import SimConfig
-from l3mvn.scenes.scene import SceneMap, disk
+from l3mvn.grid import disk
+from l3mvn.scenes.scene import SceneMap
 from l3mvn.sim.world import build_world, category_profile, wall_grids
 
 from conftest import GIBSON, needs_gibson

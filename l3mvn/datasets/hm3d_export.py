@@ -34,7 +34,8 @@ from l3mvn.episodes import generate_episodes
 from l3mvn.errors import L3MVNError
 from l3mvn.scenes.procedural import procedural_split
 from l3mvn.scenes.scan import SemanticObject, write_semantic_txt
-from l3mvn.scenes.scene import GOAL_CATEGORIES, SceneMap, disk
+from l3mvn.grid import disk
+from l3mvn.scenes.scene import GOAL_CATEGORIES, SceneMap
 from l3mvn.sim.world import build_world
 from l3mvn.task.regions import footprint_region, geodesic_field
 

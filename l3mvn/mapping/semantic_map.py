@@ -15,6 +15,7 @@ import numpy as np
 
 from l3mvn.config import MapConfig, SimConfig
 from l3mvn.errors import L3MVNError
+from l3mvn.grid import disk
 from l3mvn.mapping.projection import CameraIntrinsics, depth_to_points
 from l3mvn.types import Pose
 
@@ -336,12 +337,8 @@ def _cell(dx: float, dy: float, resolution_m: float, size: int) -> tuple[int, in
 
 def _footprint_cells(cell: tuple[int, int], radius: int, size: int) -> tuple[np.ndarray, np.ndarray]:
     """Cells of a disk around ``cell``, clipped to the map."""
-    dr, dc = np.nonzero(_disk(radius))
+    dr, dc = np.nonzero(disk(radius))
     rr, cc = dr - radius + cell[0], dc - radius + cell[1]
     inside = (rr >= 0) & (rr < size) & (cc >= 0) & (cc < size)
     return rr[inside], cc[inside]
 
-
-def _disk(radius: int) -> np.ndarray:
-    yy, xx = np.ogrid[-radius : radius + 1, -radius : radius + 1]
-    return (xx * xx + yy * yy) <= radius * radius

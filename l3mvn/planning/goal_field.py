@@ -22,6 +22,7 @@ import numpy as np
 
 from l3mvn.config import PlannerConfig
 from l3mvn.errors import L3MVNError
+from l3mvn.grid import disk
 from l3mvn.planning.collisions import CollisionTracker
 from l3mvn.planning.fmm import GeodesicField, Window, distance_field
 from l3mvn.planning.steering import TIE_WEIGHT, Steering
@@ -53,9 +54,9 @@ class GoalFields:
         # Obstacle growth in cells: ``False`` the body's (frontier costs, fallbacks), ``True`` the
         # body's plus the clearance the way to a goal keeps where the floor allows.
         self._growth = {False: cfg.obstacle_dilation_cells, True: cfg.obstacle_dilation_cells + cfg.clearance_cells}
-        self._obstacle_kernels = {wide: disk(r) for wide, r in self._growth.items()}
-        self._goal_kernels = {self.goal_dilation_cells: disk(self.goal_dilation_cells)}
-        self._escape_offsets = {wide: np.argwhere(disk(r + 1) > 0) - (r + 1) for wide, r in self._growth.items()}
+        self._obstacle_kernels = {wide: _kernel(r) for wide, r in self._growth.items()}
+        self._goal_kernels = {self.goal_dilation_cells: _kernel(self.goal_dilation_cells)}
+        self._escape_offsets = {wide: np.argwhere(disk(r + 1)) - (r + 1) for wide, r in self._growth.items()}
         self.reset(collisions)
 
     def reset(self, collisions: CollisionTracker) -> None:
@@ -226,7 +227,7 @@ class GoalFields:
         straight = math.dist(agent, nearest_goal) * res
         margin = max(cfg.window_margin_m, _margin_for(straight + lookahead + _slack(straight), straight))
         pad = dilation + 1
-        kernel = self._goal_kernels.setdefault(dilation, disk(dilation))
+        kernel = self._goal_kernels.setdefault(dilation, _kernel(dilation))
         whole = self._whole_window(obstacle, rows, cols)
         while True:
             window = whole
@@ -369,11 +370,9 @@ def _area(window: Window) -> int:
     return window.shape[0] * window.shape[1]
 
 
-def disk(radius: int) -> np.ndarray:
-    """The (2r+1, 2r+1) uint8 disk the planner grows obstacles with: policies that judge where the
-    agent fits through use the same one."""
-    r = np.arange(-radius, radius + 1)
-    return (r[:, None] ** 2 + r[None, :] ** 2 <= radius * radius).astype(np.uint8)
+def _kernel(radius: int) -> np.ndarray:
+    """``disk`` as the uint8 kernel cv2 dilates with."""
+    return disk(radius).astype(np.uint8)
 
 
 def _extent(mask: np.ndarray | None) -> tuple[int, int, int, int] | None:

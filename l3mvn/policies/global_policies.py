@@ -14,7 +14,8 @@ import cv2
 import numpy as np
 
 from l3mvn.frontiers import Frontier, Fusion
-from l3mvn.planning import disk, distance_field
+from l3mvn.grid import disk
+from l3mvn.planning import distance_field
 
 
 @dataclass(frozen=True)
@@ -101,7 +102,7 @@ class RandomSample:
 
     def __init__(self, obstacle_dilation_cells: int) -> None:
         self.dilation = obstacle_dilation_cells
-        self._kernel = disk(obstacle_dilation_cells)
+        self._kernel = disk(obstacle_dilation_cells).astype(np.uint8)
 
     def select(self, frontiers, sem_map, goal, rng):
         win = sem_map.local_window()

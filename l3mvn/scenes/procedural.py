@@ -21,7 +21,8 @@ from scipy import ndimage as ndi
 from l3mvn.config import SimConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.scenes.room_contents import RoomStats, load_room_contents, room_categories
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, GOAL_CATEGORIES, SceneMap, disk
+from l3mvn.grid import disk
+from l3mvn.scenes.scene import GIBSON_CATEGORIES, GOAL_CATEGORIES, SceneMap
 
 # Gibson's 15 first, in SemExp channel order (so channels 1..15 export as they are), then the rest
 # of what the room data contains.

@@ -14,6 +14,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from l3mvn.errors import L3MVNError
+from l3mvn.grid import disk
 from l3mvn.types import Pose
 
 GOAL_CATEGORIES: tuple[str, ...] = ("chair", "couch", "potted plant", "bed", "toilet", "tv")
@@ -23,13 +24,6 @@ GIBSON_CATEGORIES: tuple[str, ...] = (
     "chair", "couch", "potted plant", "bed", "toilet", "tv", "dining-table", "oven", "sink",
     "refrigerator", "book", "clock", "vase", "cup", "bottle",
 )
-
-
-def disk(radius_cells: int) -> np.ndarray:
-    """Boolean disk structuring element of the given radius in cells."""
-    r = int(radius_cells)
-    yy, xx = np.ogrid[-r : r + 1, -r : r + 1]
-    return (xx * xx + yy * yy) <= r * r
 
 
 @dataclass(frozen=True, eq=False)
