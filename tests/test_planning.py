@@ -266,11 +266,13 @@ def test_the_way_keeps_a_cell_more_off_walls_where_the_floor_allows():
     """Along a wall the body's 1-cell growth lets the centre graze it (19% of forward steps failed in
     lost dev episodes): the short-term goal keeps the clearance; without it, it runs along the wall."""
     obstacle = _room()
-    agent, goal = (3, 10), (3, 110)  # 2 cells off the top wall: free for the body, not with clearance
+    cfg = PlannerConfig()
+    edge = 1 + cfg.obstacle_dilation_cells  # the first row the body's growth leaves free below the wall
+    agent, goal = (edge, 10), (edge, 110)
     hugging = LocalPlanner(PlannerConfig(clearance_cells=0), RES).plan(obstacle, agent, 0.0, goal)
-    clear = LocalPlanner(PlannerConfig(), RES).plan(obstacle, agent, 0.0, goal)
-    assert hugging.short_term_goal[0] == 3
-    assert clear.short_term_goal[0] >= 1 + PlannerConfig().obstacle_dilation_cells + PlannerConfig().clearance_cells
+    clear = LocalPlanner(cfg, RES).plan(obstacle, agent, 0.0, goal)
+    assert hugging.short_term_goal[0] == edge
+    assert clear.short_term_goal[0] >= edge + cfg.clearance_cells
     assert clear.reachable and clear.distance_to_goal_m == pytest.approx(hugging.distance_to_goal_m, abs=0.15)
 
 

@@ -173,8 +173,7 @@ class MapAgent:
             if turn is not None:
                 plan = replace(plan, action=turn, reached=False)
                 reason = f"{reason}; turning to look at it"
-            elif len(search.views) < self.cfg.candidate_views \
-                    and (view := search.pick_viewpoint(sem_map, target, self.planner)) is not None:
+            elif (view := self._other_side(sem_map, target)) is not None:
                 goal, kind = view, GoalKind.VIEWPOINT
                 reason = f"{int(target.sum())} {self.goal} cell(s) still too few up close: looking from another side"
                 plan = self._plan(sem_map, goal, kind, None)
@@ -182,8 +181,7 @@ class MapAgent:
             # No nearer for a while, though the plan says it can be reached (Lindenwood/0/3: 440
             # steps round a bathroom the navmesh cut short): look from another side, or explore on.
             patience = self.cfg.goal_patience_steps
-            if len(search.views) < self.cfg.candidate_views \
-                    and (view := search.pick_viewpoint(sem_map, target, self.planner)) is not None:
+            if (view := self._other_side(sem_map, target)) is not None:
                 goal, kind = view, GoalKind.VIEWPOINT
                 reason = f"{reason}; no nearer in {patience} steps: looking from another side"
                 plan = self._plan(sem_map, goal, kind, None)
@@ -235,6 +233,12 @@ class MapAgent:
                             extra_ms={"frontiers": frontiers_ms, "policy": policy_ms})
 
     # --- pieces ------------------------------------------------------------------------------
+    def _other_side(self, sem_map: SemanticMap, target: np.ndarray) -> tuple[int, int] | None:
+        """Another pose to look at a candidate from, while it has views left (``candidate_views``)."""
+        if len(self.target.views) >= self.cfg.candidate_views:
+            return None
+        return self.target.pick_viewpoint(sem_map, target, self.planner)
+
     def _stalled(self, goal: tuple[int, int], plan) -> bool:
         """True once ``goal`` has gone ``goal_patience_steps`` steps without coming ``goal_progress_m`` closer."""
         last_goal, best, since = self._progress
