@@ -72,32 +72,64 @@ def depth_to_points(
     Without ``semantic`` every label is 0.
     """
     _check_frame(depth, semantic, intrinsics)
-    f = intrinsics.focal_px
-    # Image-plane offsets of pixel centres, in units of depth: right and up.
-    right = (np.arange(intrinsics.width, dtype=np.float32) + 0.5 - intrinsics.width / 2.0) / f
-    up = (intrinsics.height / 2.0 - 0.5 - np.arange(intrinsics.height, dtype=np.float32)) / f
-    ct, st = math.cos(tilt), math.sin(tilt)
-    # Per image row: horizontal forward reach and height gain per metre of depth once pitched.
-    forward_per_m = (ct - up * st).astype(np.float32)
-    rise_per_m = (st + up * ct).astype(np.float32)
-
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(depth) & (depth > 0) & (depth < max_depth_m)
-    # Boolean selection of broadcast row/column factors: cheaper than gathering by pixel index.
-    d = depth[valid].astype(np.float32, copy=False)
-    ahead = d * np.broadcast_to(forward_per_m[:, None], valid.shape)[valid]
-    rightward = d * np.broadcast_to(right[None, :], valid.shape)[valid]
-    ch, sh = math.cos(pose.heading), math.sin(pose.heading)
-    points = np.empty((len(d), 3), dtype=np.float32)
-    # Right of a heading h (counter-clockwise from +x) is (sin h, -cos h).
-    points[:, 0] = pose.x + ahead * ch + rightward * sh
-    points[:, 1] = pose.y + ahead * sh - rightward * ch
-    points[:, 2] = intrinsics.camera_height_m + d * np.broadcast_to(rise_per_m[:, None], valid.shape)[valid]
+    points = _back_project(depth[valid].astype(np.float32, copy=False), valid, intrinsics, pose, tilt)
     if semantic is None:
         labels = np.zeros(len(points), dtype=np.int32)
     else:
         labels = semantic[valid].astype(np.int32, copy=False)
     return PointCloud(points=points, labels=labels)
+
+
+def too_near_points(
+    depth: np.ndarray, intrinsics: CameraIntrinsics, pose: Pose, tilt: float, min_depth_m: float, max_depth_m: float
+) -> np.ndarray:
+    """(N, 3) points at ``min_depth_m`` along every invalid ray that must have met something nearer.
+
+    A sensor reads 0 both below its minimum range and beyond its maximum, but a downward ray that
+    would meet the floor within range cannot have seen nothing: the floor is there, so something
+    nearer than ``min_depth_m`` stopped it. Dropped with the rest, such readings hid every wall the
+    agent stood within 0.5 m of without having mapped it from farther (turned towards it, come round
+    a corner), and it walked into it. The point is placed at the farthest the obstacle can be, so it
+    never lies in front of it; the floor in between stays as it was, unknown or seen.
+    """
+    _check_frame(depth, None, intrinsics)
+    _, _, rise_per_m = _ray_factors(intrinsics, tilt)
+    with np.errstate(divide="ignore"):
+        floor_depth = np.where(rise_per_m < 0, intrinsics.camera_height_m / -rise_per_m, np.inf)
+    floor_in_range = (floor_depth >= min_depth_m) & (floor_depth < max_depth_m)
+    if not floor_in_range.any():
+        return np.empty((0, 3), dtype=np.float32)
+    with np.errstate(invalid="ignore"):
+        invalid = ~(np.isfinite(depth) & (depth > 0)) & floor_in_range[:, None]
+    return _back_project(np.full(int(invalid.sum()), min_depth_m, np.float32), invalid, intrinsics, pose, tilt)
+
+
+def _ray_factors(intrinsics: CameraIntrinsics, tilt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per column: rightward offset per metre of depth; per row: forward reach and height gain per
+    metre of depth once pitched by ``tilt``."""
+    f = intrinsics.focal_px
+    # Image-plane offsets of pixel centres, in units of depth: right and up.
+    right = (np.arange(intrinsics.width, dtype=np.float32) + 0.5 - intrinsics.width / 2.0) / f
+    up = (intrinsics.height / 2.0 - 0.5 - np.arange(intrinsics.height, dtype=np.float32)) / f
+    ct, st = math.cos(tilt), math.sin(tilt)
+    return right, (ct - up * st).astype(np.float32), (st + up * ct).astype(np.float32)
+
+
+def _back_project(d: np.ndarray, mask: np.ndarray, intrinsics: CameraIntrinsics, pose: Pose, tilt: float) -> np.ndarray:
+    """World points of the pixels in ``mask`` (row-major order) at depths ``d``."""
+    right, forward_per_m, rise_per_m = _ray_factors(intrinsics, tilt)
+    # Boolean selection of broadcast row/column factors: cheaper than gathering by pixel index.
+    ahead = d * np.broadcast_to(forward_per_m[:, None], mask.shape)[mask]
+    rightward = d * np.broadcast_to(right[None, :], mask.shape)[mask]
+    ch, sh = math.cos(pose.heading), math.sin(pose.heading)
+    points = np.empty((len(d), 3), dtype=np.float32)
+    # Right of a heading h (counter-clockwise from +x) is (sin h, -cos h).
+    points[:, 0] = pose.x + ahead * ch + rightward * sh
+    points[:, 1] = pose.y + ahead * sh - rightward * ch
+    points[:, 2] = intrinsics.camera_height_m + d * np.broadcast_to(rise_per_m[:, None], mask.shape)[mask]
+    return points
 
 
 def downsample_frame(

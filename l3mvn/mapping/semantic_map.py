@@ -16,7 +16,7 @@ import numpy as np
 from l3mvn.config import MapConfig, SimConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.grid import disk
-from l3mvn.mapping.projection import CameraIntrinsics, depth_to_points
+from l3mvn.mapping.projection import CameraIntrinsics, depth_to_points, too_near_points
 from l3mvn.types import Pose
 
 
@@ -146,17 +146,21 @@ class SemanticMapper:
     """
 
     def __init__(self, cfg: MapConfig, intrinsics: CameraIntrinsics, category_names: tuple[str, ...], *,
-                 max_depth_m: float, body_radius_m: float) -> None:
+                 max_depth_m: float, body_radius_m: float, min_depth_m: float = 0.0) -> None:
         """``max_depth_m``: the sensor's range (readings at or beyond it are saturation, not a
-        surface); ``body_radius_m``: the agent's, whose footprint counts as explored."""
+        surface); ``body_radius_m``: the agent's, whose footprint counts as explored;
+        ``min_depth_m``: the range below which the sensor reads 0 (0: it reads every range), so an
+        invalid ray that would have met the floor within range marks an obstacle nearer than that."""
         names = tuple(category_names)
         if len(set(names)) != len(names):
             raise L3MVNError(f"duplicate map categories in {names}")
-        if not (max_depth_m > 0 and body_radius_m >= 0):
-            raise L3MVNError(f"max_depth_m must be > 0 and body_radius_m >= 0, got {max_depth_m}, {body_radius_m}")
+        if not (max_depth_m > 0 and body_radius_m >= 0 and 0 <= min_depth_m < max_depth_m):
+            raise L3MVNError(f"need max_depth_m > 0, body_radius_m >= 0 and 0 <= min_depth_m < max_depth_m, "
+                             f"got {max_depth_m}, {body_radius_m}, {min_depth_m}")
         self.cfg = cfg
         self.intrinsics = intrinsics
         self.max_depth_m = max_depth_m
+        self.min_depth_m = min_depth_m
         self.footprint_radius_cells = int(math.floor(body_radius_m / cfg.resolution_m + 1e-9))
         self.category_names = names
         self.obstacle_max_height_m = intrinsics.camera_height_m + cfg.obstacle_above_camera_m
@@ -182,7 +186,7 @@ class SemanticMapper:
                 category_names: tuple[str, ...]) -> "SemanticMapper":
         """A mapper for the simulated robot's camera fed ``height`` x ``width`` frames."""
         return cls(cfg, CameraIntrinsics.from_sim(sim, height, width), category_names,
-                   max_depth_m=sim.max_depth_m, body_radius_m=sim.agent_radius_m)
+                   max_depth_m=sim.max_depth_m, body_radius_m=sim.agent_radius_m, min_depth_m=sim.min_depth_m)
 
     @property
     def map(self) -> SemanticMap:
@@ -239,6 +243,10 @@ class SemanticMapper:
         cloud = depth_to_points(depth, self.intrinsics, relative, tilt, semantic, self.max_depth_m)
         self._splat(cloud.points, cloud.labels, dx, dy)
         self._carve(cloud.points, dx, dy, pose.heading)
+        if self.min_depth_m > 0:
+            near = too_near_points(depth, self.intrinsics, relative, tilt, self.min_depth_m, self.max_depth_m)
+            near = near[near[:, 2] >= cfg.obstacle_min_height_m]  # below the band it could be floor
+            self._splat(near, np.zeros(len(near), dtype=np.int32), dx, dy)
         self._draw_visited(self._cell, cell)
         self._mark_footprint(cell)
         self._cell = cell
