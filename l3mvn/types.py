@@ -65,7 +65,8 @@ class Pose:
 class Observation:
     """What an agent receives each step, from any backend (ours, habitat-sim, a robot).
 
-    rgb: uint8 (H, W, 3); depth: float32 metres (H, W), 0 where invalid (beyond the sensor range);
+    rgb: uint8 (H, W, 3); depth: float32 metres (H, W), 0 where invalid (nearer than the sensor's
+    minimum range, or at or beyond its maximum: every backend reports both as 0);
     semantic: int32 (H, W) ids into ``categories`` shifted by one (0 = background);
     pose: the agent's odometry pose; tilt: camera pitch in radians (positive looks up).
     """

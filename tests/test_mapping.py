@@ -168,6 +168,82 @@ def test_depth_at_or_beyond_max_range_is_dropped():
     assert not smap.obstacle.any() and not _outside_footprint(smap).any()
 
 
+def _sensed(depth: np.ndarray) -> np.ndarray:
+    """What the sensor reports: 0 below its minimum range and at or beyond its maximum."""
+    return np.where((depth >= SIM.min_depth_m) & (depth < SIM.max_depth_m), depth, 0.0).astype(np.float32)
+
+
+def _ranged_mapper() -> SemanticMapper:
+    mapper = SemanticMapper(MapConfig(), INTR, CATS, max_depth_m=SIM.max_depth_m,
+                            body_radius_m=SIM.agent_radius_m, min_depth_m=SIM.min_depth_m)
+    mapper.reset(START)
+    return mapper
+
+
+@pytest.mark.parametrize("tilt_deg", [0.0, -30.0])
+def test_a_wall_nearer_than_the_sensor_minimum_is_an_obstacle_no_farther_than_that(tilt_deg):
+    # A wall 0.3 m ahead: level, every reading lies below the 0.5 m minimum and reads 0; looking
+    # down, the rays that meet it lowest travel just over 0.5 m and read true.
+    tilt = math.radians(tilt_deg)
+    depth = _sensed(_ray_cast(START, tilt, [(2, 0.0), (0, START.x + 0.3)]))
+    assert (depth == 0).mean() > 0.8
+    blind = _mapper().update(depth, None, START, tilt)
+    smap = _ranged_mapper().update(depth, None, START, tilt)
+    rows, cols = _cells(smap.obstacle & ~blind.obstacle)
+    assert len(rows) > 10
+    ahead_m = (cols - CENTRE) * 0.05
+    assert (ahead_m > 0.2).all() and (ahead_m <= 0.5).all()
+    assert (np.abs(rows - CENTRE) * 0.05 <= 0.5).all()
+    # The inference marks no floor: what is free is what the valid readings showed.
+    assert not ((smap.explored & ~smap.obstacle) & ~(blind.explored & ~blind.obstacle)).any()
+    if tilt_deg == 0.0:
+        assert not blind.obstacle.any()  # without the minimum range the wall does not exist
+
+
+def test_a_guessed_obstacle_never_lands_on_seen_floor_and_seen_floor_takes_it_back():
+    # Round a door frame the farthest place a too-near obstacle can be is floor: the guess must give
+    # way to what the map has seen, before or after.
+    near_wall = _sensed(_ray_cast(START, 0.0, [(2, 0.0), (0, START.x + 0.3)]))
+    open_floor = _sensed(_ray_cast(START, 0.0, [(2, 0.0), (0, START.x + 4.0)]))
+    seen_first = _ranged_mapper()
+    seen_first.update(open_floor, None, START, 0.0)
+    assert not seen_first.update(near_wall, None, START, 0.0).obstacle[:, CENTRE:CENTRE + 60].any()
+
+    guessed_first = _ranged_mapper()
+    guessed = guessed_first.update(near_wall, None, START, 0.0).obstacle.copy()
+    assert guessed.any()
+    after = guessed_first.update(open_floor, None, START, 0.0)
+    assert not (after.obstacle & guessed).any()
+    assert after.explored[guessed].all()
+
+
+def test_an_obstacle_seen_where_one_was_guessed_stays():
+    near_wall = _sensed(_ray_cast(START, 0.0, [(2, 0.0), (0, START.x + 0.32)]))
+    mapper = _ranged_mapper()
+    guessed = mapper.update(near_wall, None, START, 0.0).obstacle.copy()
+    back = Pose(START.x - 1.0, START.y, 0.0)  # 1.32 m from the wall: every reading valid
+    seen = mapper.update(_sensed(_ray_cast(back, 0.0, [(2, 0.0), (0, START.x + 0.32)])), None, back, 0.0)
+    wall_col = CENTRE + 6  # x = START.x + 0.32
+    assert seen.obstacle[:, wall_col].any()
+    # The floor seen in front of the wall took back the guesses lying on it; those behind it stay.
+    assert not (seen.obstacle & guessed)[:, :wall_col].any()
+    assert (seen.obstacle & guessed)[:, wall_col + 1:].any()
+
+
+def test_invalid_rays_that_may_have_seen_nothing_mark_nothing():
+    # Open floor: rays near the horizon meet it beyond the 5 m range, rays above it meet nothing.
+    depth = _sensed(_ray_cast(START, 0.0, [(2, 0.0)]))
+    assert (depth == 0).sum() > H * W / 2
+    smap = _ranged_mapper().update(depth, None, START, 0.0)
+    assert not smap.obstacle.any()
+    assert smap.explored.sum() == _mapper().update(depth, None, START, 0.0).explored.sum()
+
+
+def test_the_minimum_range_must_lie_below_the_maximum():
+    with pytest.raises(L3MVNError, match="min_depth_m"):
+        SemanticMapper(MapConfig(), INTR, CATS, max_depth_m=5.0, body_radius_m=0.18, min_depth_m=5.0)
+
+
 # --- categories -------------------------------------------------------------------------------
 def _labelled_column(n: int, label: int = 2) -> np.ndarray:
     """``n`` pixels of one image column near the centre row; at 2.02 m they share one map cell."""

@@ -171,6 +171,7 @@ class SemanticMapper:
             )
         m, k = cfg.map_cells, len(names)
         self._obstacle = np.zeros((m, m), dtype=bool)
+        self._inferred = np.zeros((m, m), dtype=bool)  # obstacles only guessed from too-near readings
         self._explored = np.zeros((m, m), dtype=bool)
         self._visited = np.zeros((m, m), dtype=bool)
         self._looked = np.zeros((m, m), dtype=bool)
@@ -209,7 +210,8 @@ class SemanticMapper:
 
     def reset(self, start_pose: Pose) -> SemanticMap:
         """Clear everything; ``start_pose`` becomes the map centre (heading kept as is)."""
-        for grid in (self._obstacle, self._explored, self._visited, self._looked, self._categories, self._counts):
+        for grid in (self._obstacle, self._inferred, self._explored, self._visited, self._looked, self._categories,
+                     self._counts):
             grid.fill(0)
         self._start = start_pose
         self._cell = (self.cfg.map_cells // 2, self.cfg.map_cells // 2)
@@ -241,19 +243,19 @@ class SemanticMapper:
 
         relative = Pose(dx, dy, pose.heading)
         cloud = depth_to_points(depth, self.intrinsics, relative, tilt, semantic, self.max_depth_m)
-        self._splat(cloud.points, cloud.labels, dx, dy)
-        self._carve(cloud.points, dx, dy, pose.heading)
+        seen_obstacle, seen_floor = self._splat(cloud.points, cloud.labels, dx, dy)
+        carved = self._carve(cloud.points, dx, dy, pose.heading)
         if self.min_depth_m > 0:
-            near = too_near_points(depth, self.intrinsics, relative, tilt, self.min_depth_m, self.max_depth_m)
-            near = near[near[:, 2] >= cfg.obstacle_min_height_m]  # below the band it could be floor
-            self._splat(near, np.zeros(len(near), dtype=np.int32), dx, dy)
+            self._infer_too_near(depth, relative, tilt, seen_obstacle, np.concatenate([seen_floor, carved]))
         self._draw_visited(self._cell, cell)
         self._mark_footprint(cell)
         self._cell = cell
         self._heading = pose.heading
         return self.map
 
-    def _splat(self, points: np.ndarray, labels: np.ndarray, x: float, y: float) -> None:
+    def _splat(self, points: np.ndarray, labels: np.ndarray, x: float, y: float) -> tuple[np.ndarray, np.ndarray]:
+        """Mark the points' cells; returns the flat indices of the cells that got an obstacle point and
+        of those that got a floor point."""
         cfg, size = self.cfg, self.cfg.map_cells
         half = size // 2
         cols = np.floor(points[:, 0] / cfg.resolution_m).astype(np.int64) + half
@@ -267,7 +269,8 @@ class SemanticMapper:
         below_top = z <= self.obstacle_max_height_m
         self._explored.reshape(-1)[flat[below_top]] = True
         self._looked.reshape(-1)[flat[below_top & near]] = True
-        self._obstacle.reshape(-1)[flat[below_top & (z >= cfg.obstacle_min_height_m)]] = True
+        high = z >= cfg.obstacle_min_height_m
+        self._obstacle.reshape(-1)[flat[below_top & high]] = True
 
         labelled = (labels > 0) & (z <= cfg.category_max_height_m)
         if labelled.any():
@@ -277,18 +280,20 @@ class SemanticMapper:
             total = np.minimum(counts[cells].astype(np.int64) + hits, cfg.category_point_threshold)
             counts[cells] = total
             self._categories.reshape(-1)[cells[total >= cfg.category_point_threshold]] = True
+        return flat[below_top & high], flat[~high]
 
-    def _carve(self, points: np.ndarray, x: float, y: float, heading: float) -> None:
+    def _carve(self, points: np.ndarray, x: float, y: float, heading: float) -> np.ndarray:
         """Mark explored along each viewing bearing up to the first obstacle point, or up to the
-        farthest floor point seen on that bearing."""
+        farthest floor point seen on that bearing; returns the flat indices of the cells marked."""
         cfg, bins = self.cfg, self.cfg.free_space_bins
+        none = np.empty(0, dtype=np.int64)
         if bins <= 0 or len(points) == 0:
-            return
+            return none
         z = points[:, 2]
         keep = (z >= cfg.floor_min_height_m) & (z <= self.obstacle_max_height_m)
         px, py, z = points[keep, 0] - x, points[keep, 1] - y, z[keep]
         if len(px) == 0:
-            return
+            return none
         dist = np.hypot(px, py)
         bearing = (np.arctan2(py, px) - heading + np.pi) % (2 * np.pi) - np.pi
         half = math.radians(self.intrinsics.hfov_deg) / 2
@@ -301,7 +306,7 @@ class SemanticMapper:
         reach = np.where(np.isfinite(nearest), nearest - cfg.resolution_m, reach)
         steps = np.arange(int(math.ceil(reach.max() / cfg.resolution_m)) + 1) * cfg.resolution_m
         if len(steps) < 2:
-            return
+            return none
         angles = heading - half + (np.arange(bins) + 0.5) * (2 * half / bins)
         ok = steps[None, :] < reach[:, None]
         xs = (x + steps[None, :] * np.cos(angles)[:, None])[ok]
@@ -314,6 +319,32 @@ class SemanticMapper:
         self._explored.reshape(-1)[flat] = True
         near = np.broadcast_to(steps[None, :] <= cfg.look_distance_m, ok.shape)[ok][inside]
         self._looked.reshape(-1)[flat[near]] = True
+        return flat
+
+    def _infer_too_near(self, depth: np.ndarray, pose: Pose, tilt: float, seen_obstacle: np.ndarray,
+                        seen_free: np.ndarray) -> None:
+        """Obstacles nearer than the sensor's minimum range (``too_near_points``) are a guess, put at
+        the farthest such an obstacle can be: in front of a wall that lies inside it, but round a
+        corner (a door frame) it is floor. So a guess never lands on floor the map has seen, floor
+        seen later takes it back, and an obstacle seen there makes it a real one."""
+        cfg, size = self.cfg, self.cfg.map_cells
+        obstacle, inferred = self._obstacle.reshape(-1), self._inferred.reshape(-1)
+        inferred[seen_obstacle] = False
+        back = seen_free[inferred[seen_free]]
+        obstacle[back] = False
+        inferred[back] = False
+        points = too_near_points(depth, self.intrinsics, pose, tilt, self.min_depth_m, self.max_depth_m)
+        points = points[points[:, 2] >= cfg.obstacle_min_height_m]  # below the band it could be floor
+        half = size // 2
+        cols = np.floor(points[:, 0] / cfg.resolution_m).astype(np.int64) + half
+        rows = np.floor(points[:, 1] / cfg.resolution_m).astype(np.int64) + half
+        inside = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size)
+        flat = np.unique(rows[inside] * size + cols[inside])
+        explored = self._explored.reshape(-1)
+        new = flat[~explored[flat]]  # never a cell already seen, free or obstacle
+        obstacle[new] = True
+        inferred[new] = True
+        explored[new] = True
 
     def _draw_visited(self, start: tuple[int, int], end: tuple[int, int]) -> None:
         """Rasterise the step as an 8-connected line so the trajectory has no gaps."""
