@@ -22,6 +22,7 @@ UNEXPLORED = (28, 30, 36)
 FREE = (226, 226, 220)
 GLIMPSED = (170, 170, 160)  # explored only from afar (SemanticMap.looked): what the agent may go look at
 OBSTACLE = (112, 112, 124)
+GUESSED = (70, 72, 88)  # an obstacle only guessed from depth too near to read (SemanticMap.inferred)
 TRAJECTORY = (10, 10, 10)
 # The target's cells get a white ring inside a black one: one of them shows on any background.
 TARGET_RINGS = ((255, 255, 255), (0, 0, 0))
@@ -46,6 +47,8 @@ def agent_map_view(decision: Decision, target: str = "") -> MapView:
     img[m.explored[rows, cols]] = FREE
     img[m.explored[rows, cols] & ~m.looked[rows, cols]] = GLIMPSED
     img[m.obstacle[rows, cols]] = OBSTACLE
+    if m.inferred is not None:
+        img[m.inferred[rows, cols]] = GUESSED
     if decision.collision_marks is not None and len(decision.collision_marks):
         marks = decision.collision_marks - (r0, c0)
         inside = ((marks >= 0) & (marks < (r1 - r0, c1 - c0))).all(axis=1)

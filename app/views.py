@@ -830,10 +830,11 @@ def _swatch(rgb, *, ring: bool = False) -> str:
 def _legend_html(categories, *, target: str = "", ground_truth: bool = False) -> str:
     """Map colours, then the object categories the map shows, the target first and ringed as on
     the map; the ground-truth layer's colours when it is on; then the frontier score colour bar."""
-    from app.map_image import FREE, GLIMPSED, OBSTACLE, TRAJECTORY, UNEXPLORED
+    from app.map_image import FREE, GLIMPSED, GUESSED, OBSTACLE, TRAJECTORY, UNEXPLORED
 
     fixed = [("unexplored", UNEXPLORED), ("free", FREE), ("seen from afar", GLIMPSED), ("obstacle", OBSTACLE),
-             ("collision marks", COLLISION_RGB), ("trajectory", TRAJECTORY)]
+             ("obstacle too near for depth (guessed)", GUESSED), ("collision marks", COLLISION_RGB),
+             ("trajectory", TRAJECTORY)]
     item = '<span style="display:inline-block;margin:2px 8px 2px 0;font-size:12px">{}</span>'
     cats = sorted(categories, key=lambda c: c[0] != target)
     parts = [item.format(_swatch(rgb) + name) for name, rgb in fixed]

@@ -311,3 +311,36 @@ def test_the_agents_collision_marks_show_on_its_map_in_their_own_legend_colour()
     assert "collision marks" in _legend_html(view.legend)
     colours = np.array([category_color(name) for name in PROCEDURAL_CATEGORIES + SCAN_CATEGORIES], float)
     assert np.linalg.norm(colours - np.array(COLLISION_RGB, float), axis=1).min() > 40
+
+
+def test_guessed_obstacles_show_apart_from_seen_ones_in_their_own_legend_colour():
+    """An obstacle guessed from depth too near to read may close a doorway the agent then avoids: the
+    map must show which obstacles are guesses."""
+    from app.map_image import GUESSED, OBSTACLE, agent_map_view
+    from l3mvn.scenes.categories import SCAN_CATEGORIES
+    from l3mvn.scenes.procedural import PROCEDURAL_CATEGORIES
+    from l3mvn.events import Decision
+    from l3mvn.mapping import SemanticMap
+    from l3mvn.types import Action
+
+    n = 80
+    explored = np.zeros((n, n), bool)
+    explored[20:60, 20:60] = True
+    obstacle, inferred = np.zeros((n, n), bool), np.zeros((n, n), bool)
+    obstacle[30, 30:50] = True
+    inferred[50, 30:50] = obstacle[50, 30:50] = True
+    sem_map = SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros((n, n), bool),
+                          categories=np.zeros((1, n, n), bool), category_names=("toilet",), looked=explored,
+                          resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=(40, 40), agent_heading=0.0,
+                          local_cells=n, footprint_radius_cells=3, inferred=inferred)
+    view = agent_map_view(Decision(action=Action.MOVE_FORWARD, map=sem_map))
+    r0, c0 = view.origin
+
+    def pixel(r: int, c: int) -> tuple:
+        return tuple(view.image[(r - r0) * view.scale, (c - c0) * view.scale])
+
+    assert pixel(30, 40) == OBSTACLE and pixel(50, 40) == GUESSED
+    assert "guessed" in _legend_html(view.legend)
+    colours = np.array([category_color(name) for name in PROCEDURAL_CATEGORIES + SCAN_CATEGORIES], float)
+    assert np.linalg.norm(colours - np.array(GUESSED, float), axis=1).min() > 40
+    assert sem_map.copy().inferred[50, 40] and sem_map.copy().inferred is not inferred

@@ -193,6 +193,32 @@ def test_action_turns_toward_the_goal_and_goes_forward_when_aligned(heading_deg,
     assert plan.action == expected
 
 
+def test_a_goal_that_moves_with_the_heading_does_not_turn_the_agent_back_and_forth():
+    """Lindenwood/0/7: a sighting's bearing shifted with the view, 96 degrees seen at heading 77 and
+    90 degrees at 107, so each heading turned to the other for 48 steps."""
+    planner = _planner()
+    heading, actions = 77.0, []
+    for _ in range(4):
+        goal = (80, 58) if heading < 92 else (80, 60)
+        action = planner.plan(_room(), (60, 60), math.radians(heading), goal).action
+        actions.append(action)
+        if action == Action.MOVE_FORWARD:
+            break
+        heading += 30 if action == Action.TURN_LEFT else -30
+    assert actions == [Action.TURN_LEFT, Action.MOVE_FORWARD]
+
+
+def test_a_goal_far_to_the_other_side_still_turns_the_agent_back():
+    planner = _planner()
+    assert planner.plan(_room(), (60, 60), 0.0, (75, 100)).action == Action.TURN_LEFT
+    assert planner.plan(_room(), (60, 60), math.radians(30), (40, 60)).action == Action.TURN_RIGHT
+    planner.reset()  # a new episode forgets the last turn
+    first = planner.plan(_room(), (60, 60), math.radians(77), (80, 58)).action
+    assert first == Action.TURN_LEFT
+    planner.reset()
+    assert planner.plan(_room(), (60, 60), math.radians(107), (80, 60)).action == Action.TURN_RIGHT
+
+
 @pytest.mark.parametrize("goal", [(60, 67), (60, 71), (50, 60)])
 def test_short_term_goal_inside_the_dilated_goal_heads_for_the_goal_itself(goal):
     plan = _planner().plan(_room(), (60, 60), 0.0, goal)

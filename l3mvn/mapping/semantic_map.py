@@ -38,8 +38,10 @@ class SemanticMap:
 
     The arrays are live views of the mapper's state (no per-step copy of a 960x960xK map): they change
     on the next ``update``; call ``copy()`` to keep a snapshot. ``looked`` is the part of ``explored``
-    seen from within ``MapConfig.look_distance_m`` (see there). ``start_xy`` is the world position of
-    the map centre; ``agent_heading`` is in radians, counter-clockwise from +x.
+    seen from within ``MapConfig.look_distance_m`` (see there). ``inferred`` is the part of
+    ``obstacle`` only guessed from depth readings nearer than the sensor's minimum range (None: no
+    guesses). ``start_xy`` is the world position of the map centre; ``agent_heading`` is in radians,
+    counter-clockwise from +x.
     """
 
     obstacle: np.ndarray
@@ -54,6 +56,7 @@ class SemanticMap:
     agent_heading: float
     local_cells: int
     footprint_radius_cells: int
+    inferred: np.ndarray | None = None
 
     @property
     def size(self) -> int:
@@ -135,6 +138,7 @@ class SemanticMap:
             agent_heading=self.agent_heading,
             local_cells=self.local_cells,
             footprint_radius_cells=self.footprint_radius_cells,
+            inferred=None if self.inferred is None else self.inferred.copy(),
         )
 
 
@@ -200,6 +204,7 @@ class SemanticMapper:
             categories=self._categories,
             category_names=self.category_names,
             looked=self._looked,
+            inferred=self._inferred,
             resolution_m=self.cfg.resolution_m,
             start_xy=(self._start.x, self._start.y),
             agent_cell=self._cell,

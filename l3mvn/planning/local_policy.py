@@ -69,9 +69,10 @@ class LocalPlanner:
         self._target_clears = 0  # clears of detour-making marks this episode (``target_mark_clears``)
 
     def reset(self) -> None:
-        """Forget the collision map, the cached field and the stuck history (new episode)."""
+        """Forget the collision map, the cached field, the stuck history and the last turn (new episode)."""
         self._collisions = CollisionTracker(self.cfg, self.resolution_m)
         self._fields.reset(self._collisions)
+        self._steering.reset()
         self._target_clears = 0
 
     @property

@@ -32,6 +32,10 @@ class Steering:
         self.cfg, self.resolution_m = cfg, resolution_m
         self.lookahead_cells = max(1, int(round(cfg.stg_lookahead_m / resolution_m)))
         self._ray_rows, self._ray_cols = _rays(self.lookahead_cells)
+        self._last: tuple[tuple[int, int], Action] | None = None  # the cell and action of the last choice
+
+    def reset(self) -> None:
+        self._last = None
 
     def short_term_goal(
         self, field: GeodesicField, trav: np.ndarray, agent: tuple[int, int], nearest_goal: tuple[int, int]
@@ -61,15 +65,21 @@ class Steering:
 
     def action(self, agent: tuple[int, int], heading: float, target: tuple[int, int]) -> Action:
         if target == agent:  # standing on the goal cell itself: any turn is harmless
-            return Action.TURN_LEFT
-        desired = math.atan2(target[0] - agent[0], target[1] - agent[1])
-        error = (desired - heading + math.pi) % (2 * math.pi) - math.pi
-        threshold = math.radians(self.cfg.turn_threshold_deg)
-        if error > threshold:
-            return Action.TURN_LEFT
-        if error < -threshold:
-            return Action.TURN_RIGHT
-        return Action.MOVE_FORWARD
+            action = Action.TURN_LEFT
+        else:
+            desired = math.atan2(target[0] - agent[0], target[1] - agent[1])
+            error = (desired - heading + math.pi) % (2 * math.pi) - math.pi
+            threshold = math.radians(self.cfg.turn_threshold_deg)
+            action = (Action.TURN_LEFT if error > threshold else Action.TURN_RIGHT if error < -threshold
+                      else Action.MOVE_FORWARD)
+            # A turn straight back on the same cell undoes the last one. It happens when the goal moves
+            # with the view (a sighting's bearing shifts as the frame does): the two headings then take
+            # turns for ever (Lindenwood/0/7, 48 steps). Within two thresholds of the goal, step instead.
+            back = {Action.TURN_LEFT: Action.TURN_RIGHT, Action.TURN_RIGHT: Action.TURN_LEFT}.get(action)
+            if back is not None and self._last == (agent, back) and abs(error) <= 2 * threshold:
+                action = Action.MOVE_FORWARD
+        self._last = (agent, action)
+        return action
 
 
 def _rays(length_cells: int) -> tuple[np.ndarray, np.ndarray]:
