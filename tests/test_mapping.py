@@ -194,8 +194,10 @@ def test_a_wall_nearer_than_the_sensor_minimum_is_an_obstacle_no_farther_than_th
     ahead_m = (cols - CENTRE) * 0.05
     assert (ahead_m > 0.2).all() and (ahead_m <= 0.5).all()
     assert (np.abs(rows - CENTRE) * 0.05 <= 0.5).all()
-    # The inference marks no floor: what is free is what the valid readings showed.
+    # The inference marks no floor: what is free is what the valid readings showed. Nor does it
+    # explore: a frontier behind a guess stays a frontier.
     assert not ((smap.explored & ~smap.obstacle) & ~(blind.explored & ~blind.obstacle)).any()
+    assert not smap.explored[rows, cols].any()
     if tilt_deg == 0.0:
         assert not blind.obstacle.any()  # without the minimum range the wall does not exist
 

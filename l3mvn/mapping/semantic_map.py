@@ -331,7 +331,9 @@ class SemanticMapper:
         """Obstacles nearer than the sensor's minimum range (``too_near_points``) are a guess, put at
         the farthest such an obstacle can be: in front of a wall that lies inside it, but round a
         corner (a door frame) it is floor. So a guess never lands on floor the map has seen, floor
-        seen later takes it back, and an obstacle seen there makes it a real one."""
+        seen later takes it back, and an obstacle seen there makes it a real one. A guess leaves its
+        cell unexplored: guesses beyond a door frame marked explored closed the frontier into the
+        room (oracle-frontier's Woodbine/0/2 lost its toilet, 0.3 m beyond that frontier)."""
         cfg, size = self.cfg, self.cfg.map_cells
         obstacle, inferred = self._obstacle.reshape(-1), self._inferred.reshape(-1)
         inferred[seen_obstacle] = False
@@ -345,11 +347,9 @@ class SemanticMapper:
         rows = np.floor(points[:, 1] / cfg.resolution_m).astype(np.int64) + half
         inside = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size)
         flat = np.unique(rows[inside] * size + cols[inside])
-        explored = self._explored.reshape(-1)
-        new = flat[~explored[flat]]  # never a cell already seen, free or obstacle
+        new = flat[~self._explored.reshape(-1)[flat]]  # never a cell already seen, free or obstacle
         obstacle[new] = True
         inferred[new] = True
-        explored[new] = True
 
     def _draw_visited(self, start: tuple[int, int], end: tuple[int, int]) -> None:
         """Rasterise the step as an 8-connected line so the trajectory has no gaps."""
