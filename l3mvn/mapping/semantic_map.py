@@ -342,9 +342,7 @@ class SemanticMapper:
         inferred[back] = False
         points = too_near_points(depth, self.intrinsics, pose, tilt, self.min_depth_m, self.max_depth_m)
         points = points[points[:, 2] >= cfg.obstacle_min_height_m]  # below the band it could be floor
-        half = size // 2
-        cols = np.floor(points[:, 0] / cfg.resolution_m).astype(np.int64) + half
-        rows = np.floor(points[:, 1] / cfg.resolution_m).astype(np.int64) + half
+        rows, cols = _cells(points[:, 0], points[:, 1], cfg.resolution_m, size)
         inside = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size)
         flat = np.unique(rows[inside] * size + cols[inside])
         new = flat[~self._explored.reshape(-1)[flat]]  # never a cell already seen, free or obstacle

@@ -23,6 +23,7 @@ _RAY_STEP_CELLS = 0.5
 # equally near an unreachable goal) go to the cell nearest the goal, resp. the agent; the weight is
 # far below one cell so it never overrides a real difference in distance.
 TIE_WEIGHT = 1e-3
+_TURN_BACK = {Action.TURN_LEFT: Action.TURN_RIGHT, Action.TURN_RIGHT: Action.TURN_LEFT}
 
 
 class Steering:
@@ -75,7 +76,7 @@ class Steering:
             # A turn straight back on the same cell undoes the last one. It happens when the goal moves
             # with the view (a sighting's bearing shifts as the frame does): the two headings then take
             # turns for ever (Lindenwood/0/7, 48 steps). Within two thresholds of the goal, step instead.
-            back = {Action.TURN_LEFT: Action.TURN_RIGHT, Action.TURN_RIGHT: Action.TURN_LEFT}.get(action)
+            back = _TURN_BACK.get(action)
             if back is not None and self._last == (agent, back) and abs(error) <= 2 * threshold:
                 action = Action.MOVE_FORWARD
         self._last = (agent, action)
