@@ -9,16 +9,17 @@ import pytest
 from scipy import ndimage
 
 from l3mvn.errors import L3MVNError
-from l3mvn.config import PlannerConfig
+from l3mvn.config import PlannerConfig, SimConfig
 from l3mvn.planning import LocalPlanner, Window, distance_field
 from l3mvn.types import Action
 
 RES = 0.05
+BODY = {"body_radius_m": SimConfig().agent_radius_m, "forward_step_m": SimConfig().forward_step_m}
 
 
 def _planner() -> LocalPlanner:
     """SemExp's planner: obstacles grown by disk(3), on 5 cm cells."""
-    return LocalPlanner(PlannerConfig(obstacle_dilation_cells=3), RES)
+    return LocalPlanner(PlannerConfig(obstacle_dilation_cells=3), RES, **BODY)
 
 
 def _room(size: int = 120) -> np.ndarray:
@@ -253,7 +254,7 @@ def test_a_failed_step_towards_the_target_leaves_the_passage_beside_it_open():
     obstacle[:, 33] = True
     obstacle[57:64, 33] = False  # passable rows 58-62 once the wall grows by a cell
     for target, widths_open in ((False, [False, False]), (True, [True, True])):
-        planner = LocalPlanner(PlannerConfig(), RES)
+        planner = LocalPlanner(PlannerConfig(), RES, **BODY)
         planner.plan(obstacle, (60, 30), 0.0, (60, 100), target=target)
         for still_open in widths_open:
             plan = planner.plan(obstacle, (60, 30), 0.0, (60, 100), last_move_m=0.0, target=target)
@@ -263,29 +264,59 @@ def test_a_failed_step_towards_the_target_leaves_the_passage_beside_it_open():
 
 def test_marks_that_force_a_detour_to_the_target_are_cleared_a_few_times_an_episode():
     """Forkland/0/1 at 480x640: beside the toilet the floor is a passage as wide as the agent, which
-    even a 1-cell mark closes; the way round is 5 m longer. Approaching the target the marks are
-    cleared (``target_mark_clears`` times), exploring they stay; cleared collisions still count as
-    collisions for the stuck signal."""
+    marks thickening its sides close from the second collision on; the way round is 5 m longer.
+    Approaching the target the marks are cleared (``target_mark_clears`` times), exploring they stay;
+    cleared collisions still count as collisions for the stuck signal."""
     obstacle = _room()
     obstacle[:, 33] = True
     obstacle[59:62, 33] = False  # one traversable row (60) once the wall grows by a cell
     obstacle[105:112, 33] = False  # the way round
-    cfg = PlannerConfig(stuck_collisions=PlannerConfig().target_mark_clears + 1)
-    straight = LocalPlanner(cfg, RES).plan(obstacle, (60, 30), 0.0, (60, 100), target=True).distance_to_goal_m
+    collisions = 12
+    cfg = PlannerConfig(stuck_collisions=collisions)
+    straight = LocalPlanner(cfg, RES, **BODY).plan(obstacle, (60, 30), 0.0, (60, 100), target=True).distance_to_goal_m
     for target in (False, True):
-        planner = LocalPlanner(cfg, RES)
+        planner = LocalPlanner(cfg, RES, **BODY)
         planner.plan(obstacle, (60, 30), 0.0, (60, 100), target=target)
         cleared = []
-        for _ in range(cfg.target_mark_clears + 1):
+        for _ in range(collisions):
             plan = planner.plan(obstacle, (60, 30), 0.0, (60, 100), last_move_m=0.0, target=target)
             assert plan.collided
             cleared.append(plan.marks_cleared)
             if plan.marks_cleared:
                 assert not planner.collision_map.any() and plan.distance_to_goal_m == pytest.approx(straight)
-            else:
-                assert planner.collision_map[60, 33] and plan.distance_to_goal_m > straight + cfg.target_mark_detour_m
-        assert cleared == ([True] * cfg.target_mark_clears + [False] if target else [False] * len(cleared))
+        assert sum(cleared) == (cfg.target_mark_clears if target else 0)
+        assert planner.collision_map[60, 33] and plan.distance_to_goal_m > straight + cfg.target_mark_detour_m
     assert plan.stuck
+
+
+def test_a_step_into_a_mapped_corner_thickens_the_corner_and_leaves_the_passage_open():
+    """Marstons/0/6: grazing the mapped corner of a 0.4 m passage, the rectangle laid straight ahead
+    shut it and the toilet's room was never reached. A step that swept nearer a mapped obstacle marks
+    the free cells next to what it swept; a second in a row, or one the map cannot explain, still
+    blocks the way ahead."""
+    obstacle = _room()
+    obstacle[40:56, 40:81] = True  # below the passage (rows 56-63)
+    obstacle[64:81, 40:81] = True  # above it
+    agent, west, goal = (58, 84), math.pi, (60, 20)
+    open_way = LocalPlanner(PlannerConfig(), RES, **BODY).plan(obstacle, agent, west, goal).distance_to_goal_m
+    planner = LocalPlanner(PlannerConfig(), RES, **BODY)
+    plan = planner.plan(obstacle, agent, west, goal, last_move_m=0.0)
+    marks = planner.collision_cells
+    assert plan.collided and len(marks)
+    grown = ndimage.binary_dilation(obstacle, structure=np.ones((3, 3), bool))
+    assert grown[marks[:, 0], marks[:, 1]].all() and not obstacle[marks[:, 0], marks[:, 1]].any()
+    assert plan.reachable and plan.distance_to_goal_m == pytest.approx(open_way, abs=0.3)
+    assert not planner.collision_map[agent[0], agent[1] - 4 : agent[1] - 1].any()
+    planner.plan(obstacle, agent, west, goal, last_move_m=0.0)  # again: the map was wrong, block the way ahead
+    assert planner.collision_map[agent[0], agent[1] - 4 : agent[1] - 1].all()
+
+    # The map cannot explain the same step where it shows nothing in the way, nor one along the
+    # passage, which brings the body no nearer to its walls: both block the way ahead.
+    for walls, start in ((_room(), agent), (obstacle, (58, 60))):
+        blind = LocalPlanner(PlannerConfig(), RES, **BODY)
+        blind.plan(walls, start, west, goal, last_move_m=0.0)
+        ahead = blind.collision_cells
+        assert len(ahead) and (ahead[:, 1] < start[1]).all() and (np.abs(ahead[:, 0] - start[0]) <= 2).all()
 
 
 def test_the_way_keeps_a_cell_more_off_walls_where_the_floor_allows():
@@ -295,8 +326,8 @@ def test_the_way_keeps_a_cell_more_off_walls_where_the_floor_allows():
     cfg = PlannerConfig()
     edge = 1 + cfg.obstacle_dilation_cells  # the first row the body's growth leaves free below the wall
     agent, goal = (edge, 10), (edge, 110)
-    hugging = LocalPlanner(PlannerConfig(clearance_cells=0), RES).plan(obstacle, agent, 0.0, goal)
-    clear = LocalPlanner(cfg, RES).plan(obstacle, agent, 0.0, goal)
+    hugging = LocalPlanner(PlannerConfig(clearance_cells=0), RES, **BODY).plan(obstacle, agent, 0.0, goal)
+    clear = LocalPlanner(cfg, RES, **BODY).plan(obstacle, agent, 0.0, goal)
     assert hugging.short_term_goal[0] == edge
     assert clear.short_term_goal[0] >= edge + cfg.clearance_cells
     assert clear.reachable and clear.distance_to_goal_m == pytest.approx(hugging.distance_to_goal_m, abs=0.15)
@@ -311,8 +342,8 @@ def test_a_passage_only_the_body_fits_is_taken_unless_the_clear_way_is_barely_lo
     obstacle[59:62, 60] = False  # row 60 passes the body's growth only
     obstacle[round_rows[0] : round_rows[1], 60] = False
     cfg = PlannerConfig()
-    body_only = LocalPlanner(PlannerConfig(clearance_cells=0), RES).plan(obstacle, (60, 30), 0.0, (60, 100))
-    plan = LocalPlanner(cfg, RES).plan(obstacle, (60, 30), 0.0, (60, 100))
+    body_only = LocalPlanner(PlannerConfig(clearance_cells=0), RES, **BODY).plan(obstacle, (60, 30), 0.0, (60, 100))
+    plan = LocalPlanner(cfg, RES, **BODY).plan(obstacle, (60, 30), 0.0, (60, 100))
     if narrow:
         assert plan.distance_to_goal_m == pytest.approx(body_only.distance_to_goal_m, abs=1e-4)
     else:
@@ -344,7 +375,7 @@ def test_forward_step_that_moved_enough_is_not_a_collision():
 
 def test_repeated_collisions_raise_stuck():
     cfg = PlannerConfig(stuck_collisions=5, stuck_window_steps=50)
-    planner = LocalPlanner(cfg, RES)
+    planner = LocalPlanner(cfg, RES, **BODY)
     flags = [
         planner.plan(_room(), (60, 30), 0.0, (60, 100), last_move_m=0.0).stuck for _ in range(5)
     ]
@@ -353,7 +384,7 @@ def test_repeated_collisions_raise_stuck():
 
 def test_no_progress_over_the_window_raises_stuck():
     cfg = PlannerConfig(stuck_window_steps=10, stuck_collisions=10, stuck_min_displacement_m=0.5)
-    planner = LocalPlanner(cfg, RES)
+    planner = LocalPlanner(cfg, RES, **BODY)
     flags = [planner.plan(_room(), (60, 30 + i % 2), 0.0, (60, 100)).stuck for i in range(10)]
     assert flags == [False] * 9 + [True]
     planner.reset()
@@ -394,7 +425,7 @@ def test_reached_is_true_only_within_the_radius():
 def test_small_goal_dilation_keeps_a_goal_behind_a_thin_wall_from_reading_as_reached():
     obstacle = _room()
     obstacle[:100, 64] = True  # a one-cell wall, its door at the far end
-    planner = LocalPlanner(PlannerConfig(obstacle_dilation_cells=1), RES)
+    planner = LocalPlanner(PlannerConfig(obstacle_dilation_cells=1), RES, **BODY)
     through_wall = planner.plan(obstacle, (40, 58), 0.0, (40, 70), goal_reached_radius_m=0.75)
     assert through_wall.reached  # the 0.5 m object disk reaches across the wall
     planner.reset()

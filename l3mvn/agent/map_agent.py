@@ -43,7 +43,8 @@ class MapAgent:
         self.categories = categories
         self.sim = config.sim
         self.seed = seed
-        self.planner = LocalPlanner(config.planner, config.map.resolution_m)
+        self.planner = LocalPlanner(config.planner, config.map.resolution_m, body_radius_m=config.sim.agent_radius_m,
+                                    forward_step_m=config.sim.forward_step_m)
         self.noise = SegmentationNoise(config.policy.seg_noise, len(categories), seed)
         self.target = TargetSearch(config.agent)
         self.explore = ExplorationGoals(global_policy, config, self.planner)

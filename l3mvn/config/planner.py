@@ -30,7 +30,8 @@ class PlannerConfig:
     turn_threshold_deg: float = 15.0
     collision_threshold_m: float = 0.10
     # A failed forward step blocks a rectangle ahead of the agent: it starts this many cells ahead,
-    # is this long, and this wide, widening by 2 cells per consecutive collision up to the maximum.
+    # is this long, and this wide, widening by 2 cells per consecutive collision up to the maximum
+    # (the first of a run that swept nearer a mapped obstacle marks the cells beside it instead).
     collision_mark_offset_cells: int = 2
     collision_mark_length_cells: int = 3
     collision_mark_width_cells: int = 5

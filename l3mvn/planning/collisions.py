@@ -1,9 +1,14 @@
 """Failed forward steps: the cells they block (the collision map) and whether the agent is stuck.
 
-A forward step that moved less than ``collision_threshold_m`` blocks a rectangle ahead of the agent,
-wider with every consecutive collision (narrower marks while approaching a target, where one wide mark
-can close the last passage); the planner treats those cells as obstacles. Stuck means too
-many collisions, or too little displacement, within the last ``stuck_window_steps``.
+A forward step that moved less than ``collision_threshold_m`` marks cells the planner then treats as
+obstacles, more with every consecutive collision (fewer while approaching a target, where one wide
+mark can close the last passage). Where the map shows an obstacle in the way the body swept, that
+is likely what it hit: the first failed step marks the free cells next to it. A rectangle straight
+ahead, laid after grazing a mapped corner, shut the 0.4 m passage beside it (oracle-frontier's
+Marstons/0/6 then never reached its toilet's room). A collision the map cannot explain, or a second
+failed step in a row (the map's explanation was wrong: floor the navmesh lost, where the agent
+walked into the same spot 16 times), blocks the rectangle ahead. Stuck
+means too many collisions, or too little displacement, within the last ``stuck_window_steps``.
 """
 
 from __future__ import annotations
@@ -20,8 +25,13 @@ from l3mvn.errors import L3MVNError
 class CollisionTracker:
     """The collision marks and motion history of one episode on one map."""
 
-    def __init__(self, cfg: PlannerConfig, resolution_m: float) -> None:
+    def __init__(self, cfg: PlannerConfig, resolution_m: float, *, body_radius_m: float,
+                 forward_step_m: float) -> None:
+        """``body_radius_m``, ``forward_step_m``: the agent's, for the region a forward step sweeps."""
+        if not (body_radius_m >= 0 and forward_step_m > 0):
+            raise L3MVNError(f"need body_radius_m >= 0 and forward_step_m > 0, got {body_radius_m}, {forward_step_m}")
         self.cfg, self.resolution_m = cfg, resolution_m
+        self._body_cells, self._step_cells = body_radius_m / resolution_m, forward_step_m / resolution_m
         self.map: np.ndarray | None = None
         self._cells = np.zeros((0, 2), dtype=np.int32)  # the marked cells, in marking order
         self._consecutive_collisions = 0
@@ -50,8 +60,9 @@ class CollisionTracker:
         self._cells = np.zeros((0, 2), dtype=np.int32)
 
     def record(self, agent: tuple[int, int], heading: float, last_move_m: float | None, *,
-               target: bool = False) -> bool:
-        """Mark the cells ahead as blocked when a forward step moved less than the threshold; with
+               target: bool = False, obstacle: np.ndarray | None = None) -> bool:
+        """Mark cells as blocked when a forward step moved less than the threshold: round the
+        ``obstacle`` cells (the agent's map) the step swept into, else a rectangle ahead; with
         ``target`` (approaching the goal object) the narrower target widths apply."""
         cfg = self.cfg
         collided = False
@@ -64,28 +75,64 @@ class CollisionTracker:
             first, widest = ((cfg.collision_mark_target_width_cells, cfg.collision_mark_target_max_width_cells)
                              if target else (cfg.collision_mark_width_cells, cfg.collision_mark_max_width_cells))
             width = min(first + 2 * (self._consecutive_collisions - 1), widest)
-            ahead = np.arange(
-                cfg.collision_mark_offset_cells,
-                cfg.collision_mark_offset_cells + cfg.collision_mark_length_cells - 0.5 + 1e-9,
-                0.5,
-            )
-            half = (width - 1) / 2
-            side = np.arange(-half, half + 1e-9, 0.5)
-            a, s = np.meshgrid(ahead, side, indexing="ij")
-            sin_h, cos_h = math.sin(heading), math.cos(heading)
-            rows = np.rint(agent[0] + a * sin_h + s * cos_h).astype(np.int64).ravel()
-            cols = np.rint(agent[1] + a * cos_h - s * sin_h).astype(np.int64).ravel()
-            shape = self.map.shape
-            ok = (rows >= 0) & (rows < shape[0]) & (cols >= 0) & (cols < shape[1])
-            ok &= (rows != agent[0]) | (cols != agent[1])
-            rows, cols = rows[ok], cols[ok]
-            fresh = np.unique((rows * shape[1] + cols)[~self.map[rows, cols]])
+            first_try = obstacle is not None and self._consecutive_collisions == 1
+            hug = self._round_what_was_hit(obstacle, agent, heading) if first_try else None
+            rows, cols = hug if hug is not None else self._ahead(agent, heading, width)
+            fresh = np.unique((rows * self.map.shape[1] + cols)[~self.map[rows, cols]])
             self.map[rows, cols] = True
             if len(fresh):
-                added = np.stack(np.divmod(fresh, shape[1]), axis=1).astype(np.int32)
+                added = np.stack(np.divmod(fresh, self.map.shape[1]), axis=1).astype(np.int32)
                 self._cells = np.concatenate([self._cells, added])
         self._recent_collisions.append(collided)
         return collided
+
+    def _ahead(self, agent: tuple[int, int], heading: float, width: int) -> tuple[np.ndarray, np.ndarray]:
+        """The cells of a ``width``-cell rectangle ahead of the agent (SemExp's mark)."""
+        cfg = self.cfg
+        ahead = np.arange(
+            cfg.collision_mark_offset_cells,
+            cfg.collision_mark_offset_cells + cfg.collision_mark_length_cells - 0.5 + 1e-9,
+            0.5,
+        )
+        half = (width - 1) / 2
+        side = np.arange(-half, half + 1e-9, 0.5)
+        a, s = np.meshgrid(ahead, side, indexing="ij")
+        sin_h, cos_h = math.sin(heading), math.cos(heading)
+        rows = np.rint(agent[0] + a * sin_h + s * cos_h).astype(np.int64).ravel()
+        cols = np.rint(agent[1] + a * cos_h - s * sin_h).astype(np.int64).ravel()
+        shape = self.map.shape
+        ok = (rows >= 0) & (rows < shape[0]) & (cols >= 0) & (cols < shape[1])
+        ok &= (rows != agent[0]) | (cols != agent[1])
+        return rows[ok], cols[ok]
+
+    def _round_what_was_hit(self, obstacle: np.ndarray, agent: tuple[int, int],
+                            heading: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """The free cells the step swept (the body's disk moved one step ahead, the half in front of
+        its centre) next to the obstacle cells it swept and would have come
+        nearer to than it stands to any obstacle now; None when there are none. A wall alongside is no nearer a step on,
+        so a step that failed beside one hit something the map does not show."""
+        reach = int(math.ceil(self._body_cells + self._step_cells))
+        dr, dc = np.mgrid[-reach:reach + 1, -reach:reach + 1]
+        rows, cols = dr.ravel() + agent[0], dc.ravel() + agent[1]
+        shape = obstacle.shape
+        inside = (rows >= 0) & (rows < shape[0]) & (cols >= 0) & (cols < shape[1])
+        dr, dc, rows, cols = dr.ravel()[inside], dc.ravel()[inside], rows[inside], cols[inside]
+        blocked = obstacle[rows, cols]
+        if not blocked.any():
+            return None
+        along = dr * math.sin(heading) + dc * math.cos(heading)
+        across = -dr * math.cos(heading) + dc * math.sin(heading)
+        gap = np.hypot(np.maximum(along - self._step_cells, 0.0), across)
+        clearance = np.hypot(dr[blocked], dc[blocked]).min()
+        swept = (along >= 0) & (gap <= self._body_cells)
+        hit = blocked & swept & (gap < clearance - 0.5)
+        if not hit.any():
+            return None
+        free = ~blocked & swept & ((rows != agent[0]) | (cols != agent[1]))
+        near = (np.abs(rows[free][:, None] - rows[hit][None, :]) <= 1) & (
+            np.abs(cols[free][:, None] - cols[hit][None, :]) <= 1)
+        keep = near.any(axis=1)
+        return rows[free][keep], cols[free][keep]
 
     @property
     def cells(self) -> np.ndarray:

@@ -56,13 +56,16 @@ class LocalPlanner:
     ``reset`` between episodes. ``fmm_runs`` counts the marches so far (for speed reports).
     """
 
-    def __init__(self, cfg: PlannerConfig, resolution_m: float) -> None:
-        """``resolution_m``: the cell size of the maps it will plan on (the agent's map)."""
+    def __init__(self, cfg: PlannerConfig, resolution_m: float, *, body_radius_m: float,
+                 forward_step_m: float) -> None:
+        """``resolution_m``: the cell size of the maps it will plan on (the agent's map);
+        ``body_radius_m``, ``forward_step_m``: the agent's, to tell what a failed step ran into."""
         if not (math.isfinite(resolution_m) and resolution_m > 0):
             raise L3MVNError(f"resolution_m must be positive, got {resolution_m}")
         self.cfg, self.resolution_m = cfg, resolution_m
+        self._body = {"body_radius_m": body_radius_m, "forward_step_m": forward_step_m}
         self._steering = Steering(cfg, resolution_m)
-        self._collisions = CollisionTracker(cfg, resolution_m)
+        self._collisions = CollisionTracker(cfg, resolution_m, **self._body)
         self._fields = GoalFields(cfg, resolution_m, self._steering, self._collisions)
         self.goal_dilation_cells = self._fields.goal_dilation_cells
         self.lookahead_cells = self._steering.lookahead_cells
@@ -70,7 +73,7 @@ class LocalPlanner:
 
     def reset(self) -> None:
         """Forget the collision map, the cached field, the stuck history and the last turn (new episode)."""
-        self._collisions = CollisionTracker(self.cfg, self.resolution_m)
+        self._collisions = CollisionTracker(self.cfg, self.resolution_m, **self._body)
         self._fields.reset(self._collisions)
         self._steering.reset()
         self._target_clears = 0
@@ -126,7 +129,7 @@ class LocalPlanner:
             raise L3MVNError(f"goal_reached_radius_m must be >= 0, got {goal_reached_radius_m}")
         goal_rows, goal_cols = _goal_cells(goal, obstacle.shape)
         dilation = self._dilation_cells(goal_dilation_m)
-        collided = self._collisions.record(agent, heading, last_move_m, target=target)
+        collided = self._collisions.record(agent, heading, last_move_m, target=target, obstacle=obstacle)
 
         nearest_goal = _nearest(agent, goal_rows, goal_cols)
         field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols, nearest_goal,
