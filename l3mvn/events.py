@@ -34,6 +34,7 @@ class GoalKind(enum.StrEnum):
     EXPLORE = "explore"  # no frontier left: a random free cell
     LOOK = "look"  # an area only seen from afar: go and look
     MANUAL = "manual"  # a cell picked in the dashboard
+    ESCAPE = "escape"  # stuck: collision marks cleared, a random turn then forward
     LOOK_AROUND = "look-around"  # the initial turn in place
 
 

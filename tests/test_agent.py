@@ -265,6 +265,28 @@ def test_a_target_the_agent_cannot_get_closer_to_is_stopped_at_within_the_succes
         assert "no path closer" in d.reason
 
 
+def test_a_stuck_agent_escapes_under_its_own_goal_kind(env):
+    """Stuck while exploring: the marks go, a random turn then two steps forward, each decision
+    labelled ``GoalKind.ESCAPE`` (a plain string there broke consumers that read the kind's name)."""
+    from l3mvn.events import GoalKind
+
+    agent = _agent(env, look_around_steps=0)
+    episode = _episode("toilet")
+    obs = env.reset(episode)
+    agent.reset(episode)
+    agent.act(obs)
+    plan = agent.planner.plan
+    agent.planner.plan = lambda *a, **k: dataclasses.replace(plan(*a, **k), stuck=True)
+    first = agent.act(obs)
+    assert "escaping" in first.reason and first.goal_kind in (GoalKind.FRONTIER, GoalKind.EXPLORE)
+    agent.planner.plan = plan
+    rest = []
+    while agent._escape:
+        rest.append(agent.act(obs))
+    assert rest and all(d.goal_kind is GoalKind.ESCAPE and d.goal_kind.name == "ESCAPE" for d in rest)
+    assert [d.action for d in rest][-2:] == [Action.MOVE_FORWARD] * 2
+
+
 def test_stop_distances_are_checked_against_each_other_and_the_success_distance(env):
     with pytest.raises(L3MVNError, match="stop_distance_m <= blocked_stop_distance_m"):
         AgentConfig(stop_distance_m=0.95, blocked_stop_distance_m=0.9)

@@ -106,7 +106,7 @@ class MapAgent:
 
         if self._escape:
             self._steps += 1
-            return self._decide(obs, self._escape.pop(), sem_map, self.explore.cell, "escape",
+            return self._decide(obs, self._escape.pop(), sem_map, self.explore.cell, GoalKind.ESCAPE,
                                 "escaping: cleared collision marks, random turn then forward", t, None, None)
         search, explore = self.target, self.explore
         target, confirmed = search.mask(sem_map, self.goal)
