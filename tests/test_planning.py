@@ -289,34 +289,44 @@ def test_marks_that_force_a_detour_to_the_target_are_cleared_a_few_times_an_epis
     assert plan.stuck
 
 
-def test_a_step_into_a_mapped_corner_thickens_the_corner_and_leaves_the_passage_open():
-    """Marstons/0/6: grazing the mapped corner of a 0.4 m passage, the rectangle laid straight ahead
-    shut it and the toilet's room was never reached. A step that swept nearer a mapped obstacle marks
-    the free cells next to what it swept; a second in a row, or one the map cannot explain, still
-    blocks the way ahead."""
+def _passage(below: int, above: int) -> np.ndarray:
+    """A room split by two blocks (columns 40-80) with a passage between rows ``below`` and ``above``."""
     obstacle = _room()
-    obstacle[40:56, 40:81] = True  # below the passage (rows 56-63)
-    obstacle[64:81, 40:81] = True  # above it
+    obstacle[20:below, 40:81] = True
+    obstacle[above:101, 40:81] = True
+    return obstacle
+
+
+def test_a_step_into_a_mapped_corner_marks_beside_it_when_a_mark_across_would_shut_the_way():
+    """Marstons/0/6: grazing the mapped corner of a 0.4 m passage, the rectangle laid straight ahead
+    shut it and the toilet's room was never reached. When the rectangle lengthens the way by over
+    ``target_mark_detour_m`` and the step swept nearer a mapped obstacle, the free cells beside that
+    obstacle are marked instead; a second failed step in a row still blocks the way ahead."""
+    obstacle = _passage(57, 62)  # rows 57-61 free
     agent, west, goal = (58, 84), math.pi, (60, 20)
     open_way = LocalPlanner(PlannerConfig(), RES, **BODY).plan(obstacle, agent, west, goal).distance_to_goal_m
     planner = LocalPlanner(PlannerConfig(), RES, **BODY)
     plan = planner.plan(obstacle, agent, west, goal, last_move_m=0.0)
     marks = planner.collision_cells
-    assert plan.collided and len(marks)
+    assert plan.collided and plan.marked_beside and len(marks)
     grown = ndimage.binary_dilation(obstacle, structure=np.ones((3, 3), bool))
     assert grown[marks[:, 0], marks[:, 1]].all() and not obstacle[marks[:, 0], marks[:, 1]].any()
     assert plan.reachable and plan.distance_to_goal_m == pytest.approx(open_way, abs=0.3)
-    assert not planner.collision_map[agent[0], agent[1] - 4 : agent[1] - 1].any()
-    planner.plan(obstacle, agent, west, goal, last_move_m=0.0)  # again: the map was wrong, block the way ahead
-    assert planner.collision_map[agent[0], agent[1] - 4 : agent[1] - 1].all()
+    again = planner.plan(obstacle, agent, west, goal, last_move_m=0.0)  # the map was wrong: block the way
+    assert not again.marked_beside and planner.collision_map[agent[0], agent[1] - 4 : agent[1] - 1].all()
 
-    # The map cannot explain the same step where it shows nothing in the way, nor one along the
-    # passage, which brings the body no nearer to its walls: both block the way ahead.
-    for walls, start in ((_room(), agent), (obstacle, (58, 60))):
-        blind = LocalPlanner(PlannerConfig(), RES, **BODY)
-        blind.plan(walls, start, west, goal, last_move_m=0.0)
-        ahead = blind.collision_cells
-        assert len(ahead) and (ahead[:, 1] < start[1]).all() and (np.abs(ahead[:, 0] - start[0]) <= 2).all()
+
+@pytest.mark.parametrize("walls, start", [
+    (_room(), (58, 84)),  # nothing mapped in the way
+    (_passage(57, 62), (59, 60)),  # along the passage: no nearer its walls a step on
+    (_passage(55, 64), (58, 84)),  # a wide passage the rectangle leaves open
+])
+def test_a_step_the_map_cannot_explain_or_whose_mark_leaves_the_way_open_blocks_the_way_ahead(walls, start):
+    planner = LocalPlanner(PlannerConfig(), RES, **BODY)
+    plan = planner.plan(walls, start, math.pi, (60, 20), last_move_m=0.0)
+    ahead = planner.collision_cells
+    assert plan.collided and not plan.marked_beside
+    assert len(ahead) and (ahead[:, 1] < start[1]).all() and (np.abs(ahead[:, 0] - start[0]) <= 2).all()
 
 
 def test_the_way_keeps_a_cell_more_off_walls_where_the_floor_allows():

@@ -191,6 +191,9 @@ class MapAgent:
                 explore.force()
                 reason = f"{self.goal} cells no nearer in {patience} steps from {len(search.views) + 1} views: set aside"
         t["planning"] = time.perf_counter()
+        if plan.marked_beside:
+            reason = (f"{reason}; collision marked beside the mapped obstacle it ran into: across the way "
+                      f"it lengthened it by over {self.config.planner.target_mark_detour_m:g} m")
         if plan.marks_cleared:
             reason = (f"{reason}; collision marks cleared: they lengthened the way by over "
                       f"{self.config.planner.target_mark_detour_m:g} m")

@@ -30,8 +30,7 @@ class PlannerConfig:
     turn_threshold_deg: float = 15.0
     collision_threshold_m: float = 0.10
     # A failed forward step blocks a rectangle ahead of the agent: it starts this many cells ahead,
-    # is this long, and this wide, widening by 2 cells per consecutive collision up to the maximum
-    # (the first of a run that swept nearer a mapped obstacle marks the cells beside it instead).
+    # is this long, and this wide, widening by 2 cells per consecutive collision up to the maximum.
     collision_mark_offset_cells: int = 2
     collision_mark_length_cells: int = 3
     collision_mark_width_cells: int = 5
@@ -46,7 +45,9 @@ class PlannerConfig:
     # eroded to 0.2 m): at 480x640 the plan then led 7 m round through the unknown, 1.2 m from the
     # toilet, in Forkland/0/1 (lost by frontier, l3mvn-zs and l3mvn-ff). Approaching the target, marks
     # that lengthen the way to it by more than this are cleared, at most this many times an episode
-    # (a real obstacle is bumped into again and marked again; the stuck signal still counts).
+    # (a real obstacle is bumped into again and marked again; the stuck signal still counts). Toward
+    # any goal, the first failed step of a run whose rectangle lengthens the way so, and which swept
+    # nearer a mapped obstacle, marks the free cells beside that obstacle instead.
     target_mark_detour_m: float = 2.0
     target_mark_clears: int = 3
     # Stuck: this many collisions, or less than this displacement, within the last window of steps.

@@ -1,14 +1,14 @@
 """Failed forward steps: the cells they block (the collision map) and whether the agent is stuck.
 
-A forward step that moved less than ``collision_threshold_m`` marks cells the planner then treats as
-obstacles, more with every consecutive collision (fewer while approaching a target, where one wide
-mark can close the last passage). Where the map shows an obstacle in the way the body swept, that
-is likely what it hit: the first failed step marks the free cells next to it. A rectangle straight
-ahead, laid after grazing a mapped corner, shut the 0.4 m passage beside it (oracle-frontier's
-Marstons/0/6 then never reached its toilet's room). A collision the map cannot explain, or a second
-failed step in a row (the map's explanation was wrong: floor the navmesh lost, where the agent
-walked into the same spot 16 times), blocks the rectangle ahead. Stuck
-means too many collisions, or too little displacement, within the last ``stuck_window_steps``.
+A forward step that moved less than ``collision_threshold_m`` blocks a rectangle ahead of the agent,
+wider with every consecutive collision (narrower marks while approaching a target, where one wide mark
+can close the last passage); the planner treats those cells as obstacles. Where the map shows an
+obstacle the first failed step of a run swept nearer to, the cells beside that obstacle are kept as
+an alternative mark, which the planner lays instead when the rectangle lengthens its way: grazing a
+mapped corner, the rectangle shut the 0.4 m passage beside it (oracle-frontier's Marstons/0/6 never
+reached its toilet's room). Not always: half the time the map's obstacle was not what the body hit
+(floor the navmesh lost looks free on the map), and hugging it cost a second collision. Stuck means
+too many collisions, or too little displacement, within the last ``stuck_window_steps``.
 """
 
 from __future__ import annotations
@@ -34,6 +34,8 @@ class CollisionTracker:
         self._body_cells, self._step_cells = body_radius_m / resolution_m, forward_step_m / resolution_m
         self.map: np.ndarray | None = None
         self._cells = np.zeros((0, 2), dtype=np.int32)  # the marked cells, in marking order
+        self._fresh = 0  # how many of them the last record() added
+        self._beside: tuple[np.ndarray, np.ndarray] | None = None  # the last step's alternative mark
         self._consecutive_collisions = 0
         window = cfg.stuck_window_steps
         self._recent_collisions: collections.deque[bool] = collections.deque(maxlen=window)
@@ -61,11 +63,13 @@ class CollisionTracker:
 
     def record(self, agent: tuple[int, int], heading: float, last_move_m: float | None, *,
                target: bool = False, obstacle: np.ndarray | None = None) -> bool:
-        """Mark cells as blocked when a forward step moved less than the threshold: round the
-        ``obstacle`` cells (the agent's map) the step swept into, else a rectangle ahead; with
-        ``target`` (approaching the goal object) the narrower target widths apply."""
+        """Mark the cells ahead as blocked when a forward step moved less than the threshold; with
+        ``target`` (approaching the goal object) the narrower target widths apply. With the agent's
+        ``obstacle`` map, the first failed step of a run also keeps the cells beside the obstacle
+        it swept nearer to (``can_mark_beside``)."""
         cfg = self.cfg
         collided = False
+        self._fresh, self._beside = 0, None
         if last_move_m is not None:
             if not math.isfinite(last_move_m) or last_move_m < 0:
                 raise L3MVNError(f"last_move_m must be a finite distance >= 0 or None, got {last_move_m}")
@@ -75,16 +79,36 @@ class CollisionTracker:
             first, widest = ((cfg.collision_mark_target_width_cells, cfg.collision_mark_target_max_width_cells)
                              if target else (cfg.collision_mark_width_cells, cfg.collision_mark_max_width_cells))
             width = min(first + 2 * (self._consecutive_collisions - 1), widest)
-            first_try = obstacle is not None and self._consecutive_collisions == 1
-            hug = self._round_what_was_hit(obstacle, agent, heading) if first_try else None
-            rows, cols = hug if hug is not None else self._ahead(agent, heading, width)
-            fresh = np.unique((rows * self.map.shape[1] + cols)[~self.map[rows, cols]])
-            self.map[rows, cols] = True
-            if len(fresh):
-                added = np.stack(np.divmod(fresh, self.map.shape[1]), axis=1).astype(np.int32)
-                self._cells = np.concatenate([self._cells, added])
+            self._mark(*self._ahead(agent, heading, width))
+            if obstacle is not None and self._consecutive_collisions == 1:
+                self._beside = self._beside_what_was_hit(obstacle, agent, heading)
         self._recent_collisions.append(collided)
         return collided
+
+    @property
+    def can_mark_beside(self) -> bool:
+        """Whether the last failed step swept nearer a mapped obstacle, so ``mark_beside`` may replace
+        its rectangle."""
+        return self._beside is not None
+
+    def mark_beside(self) -> None:
+        """Replace the last step's rectangle with the free cells beside the obstacle it swept nearer to."""
+        if self._beside is None:
+            raise L3MVNError("mark_beside() needs a failed step that swept nearer a mapped obstacle")
+        kept = len(self._cells) - self._fresh
+        gone = self._cells[kept:]
+        self.map[gone[:, 0], gone[:, 1]] = False
+        self._cells = self._cells[:kept]
+        beside, self._beside = self._beside, None
+        self._mark(*beside)
+
+    def _mark(self, rows: np.ndarray, cols: np.ndarray) -> None:
+        fresh = np.unique((rows * self.map.shape[1] + cols)[~self.map[rows, cols]])
+        self.map[rows, cols] = True
+        self._fresh = len(fresh)
+        if len(fresh):
+            added = np.stack(np.divmod(fresh, self.map.shape[1]), axis=1).astype(np.int32)
+            self._cells = np.concatenate([self._cells, added])
 
     def _ahead(self, agent: tuple[int, int], heading: float, width: int) -> tuple[np.ndarray, np.ndarray]:
         """The cells of a ``width``-cell rectangle ahead of the agent (SemExp's mark)."""
@@ -105,12 +129,12 @@ class CollisionTracker:
         ok &= (rows != agent[0]) | (cols != agent[1])
         return rows[ok], cols[ok]
 
-    def _round_what_was_hit(self, obstacle: np.ndarray, agent: tuple[int, int],
-                            heading: float) -> tuple[np.ndarray, np.ndarray] | None:
+    def _beside_what_was_hit(self, obstacle: np.ndarray, agent: tuple[int, int],
+                             heading: float) -> tuple[np.ndarray, np.ndarray] | None:
         """The free cells the step swept (the body's disk moved one step ahead, the half in front of
-        its centre) next to the obstacle cells it swept and would have come
-        nearer to than it stands to any obstacle now; None when there are none. A wall alongside is no nearer a step on,
-        so a step that failed beside one hit something the map does not show."""
+        its centre) next to the obstacle cells it swept and would have come nearer to than it stands
+        to any obstacle now; None when there are none. A wall alongside is no nearer a step on, so a
+        step that failed beside one hit something the map does not show."""
         reach = int(math.ceil(self._body_cells + self._step_cells))
         dr, dc = np.mgrid[-reach:reach + 1, -reach:reach + 1]
         rows, cols = dr.ravel() + agent[0], dc.ravel() + agent[1]
@@ -132,7 +156,7 @@ class CollisionTracker:
         near = (np.abs(rows[free][:, None] - rows[hit][None, :]) <= 1) & (
             np.abs(cols[free][:, None] - cols[hit][None, :]) <= 1)
         keep = near.any(axis=1)
-        return rows[free][keep], cols[free][keep]
+        return (rows[free][keep], cols[free][keep]) if keep.any() else None
 
     @property
     def cells(self) -> np.ndarray:

@@ -35,6 +35,9 @@ class Plan:
     replanned: whether this step ran FMM (False when the previous field was still valid).
     marks_cleared: approaching the target, the collision marks lengthened the way to it by more
     than ``target_mark_detour_m`` and were cleared this step (``LocalPlanner.plan``).
+    marked_beside: this step's failed step swept nearer a mapped obstacle, and its rectangle across
+    the way lengthened it by more than ``target_mark_detour_m``: the cells beside the obstacle
+    were marked instead.
     """
 
     action: Action
@@ -47,6 +50,7 @@ class Plan:
     replanned: bool
     field: GeodesicField
     marks_cleared: bool = False  # collision marks that made a detour to the target were just cleared
+    marked_beside: bool = False  # this step's collision marked beside what it ran into (``CollisionTracker``)
 
 
 class LocalPlanner:
@@ -136,8 +140,17 @@ class LocalPlanner:
                                                             dilation)
         d_agent = float(field.at(*agent))
         # Only a replanned field can hold new marks across the way (a reused one provably does not).
-        marks_cleared = target and replanned and self._marks_make_detour(obstacle, agent, goal_rows, goal_cols,
-                                                                         nearest_goal, dilation, d_agent)
+        marked_beside = replanned and self._collisions.can_mark_beside and self._marks_make_detour(
+            obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, d_agent)
+        if marked_beside:
+            self._collisions.mark_beside()
+            self._fields.forget()
+            field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols,
+                                                                nearest_goal, dilation)
+            d_agent = float(field.at(*agent))
+        marks_cleared = (target and replanned and self._target_clears < self.cfg.target_mark_clears
+                         and self._marks_make_detour(obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation,
+                                                     d_agent))
         if marks_cleared:
             self._collisions.clear_marks()
             self._fields.forget()
@@ -167,12 +180,13 @@ class LocalPlanner:
             replanned=replanned,
             field=field,
             marks_cleared=marks_cleared,
+            marked_beside=marked_beside,
         )
 
     def _marks_make_detour(self, obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, d_agent) -> bool:
-        """Whether the collision marks lengthen the way to the target by more than
-        ``target_mark_detour_m`` (or close it), with clears left this episode."""
-        if not len(self._collisions.cells) or self._target_clears >= self.cfg.target_mark_clears:
+        """Whether the collision marks lengthen the way to the goal by more than
+        ``target_mark_detour_m`` (or close it)."""
+        if not len(self._collisions.cells):
             return False
         free, _, _, _ = self._fields.field_to(obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, marks=False)
         return float(free.at(*agent)) + self.cfg.target_mark_detour_m < d_agent
