@@ -300,20 +300,34 @@ def _passage(below: int, above: int) -> np.ndarray:
 def test_a_step_into_a_mapped_corner_marks_beside_it_when_a_mark_across_would_shut_the_way():
     """Marstons/0/6: grazing the mapped corner of a 0.4 m passage, the rectangle laid straight ahead
     shut it and the toilet's room was never reached. When the rectangle lengthens the way by over
-    ``target_mark_detour_m`` and the step swept nearer a mapped obstacle, the free cells beside that
-    obstacle are marked instead; a second failed step in a row still blocks the way ahead."""
+    ``target_mark_detour_m``, the step swept nearer a mapped obstacle and, with the cells beside that
+    obstacle marked instead, the plan turns off the failed heading, those are marked; a second
+    failed step in a row still blocks the way ahead."""
     obstacle = _passage(57, 62)  # rows 57-61 free
-    agent, west, goal = (58, 84), math.pi, (60, 20)
-    open_way = LocalPlanner(PlannerConfig(), RES, **BODY).plan(obstacle, agent, west, goal).distance_to_goal_m
+    agent, into_corner, goal = (59, 84), math.pi + 0.3, (60, 20)  # 17 degrees towards the lower block
+    open_way = LocalPlanner(PlannerConfig(), RES, **BODY).plan(obstacle, agent, into_corner, goal).distance_to_goal_m
     planner = LocalPlanner(PlannerConfig(), RES, **BODY)
-    plan = planner.plan(obstacle, agent, west, goal, last_move_m=0.0)
+    plan = planner.plan(obstacle, agent, into_corner, goal, last_move_m=0.0)
     marks = planner.collision_cells
-    assert plan.collided and plan.marked_beside and len(marks)
+    assert plan.collided and plan.marked_beside and len(marks) and plan.action != Action.MOVE_FORWARD
     grown = ndimage.binary_dilation(obstacle, structure=np.ones((3, 3), bool))
     assert grown[marks[:, 0], marks[:, 1]].all() and not obstacle[marks[:, 0], marks[:, 1]].any()
     assert plan.reachable and plan.distance_to_goal_m == pytest.approx(open_way, abs=0.3)
-    again = planner.plan(obstacle, agent, west, goal, last_move_m=0.0)  # the map was wrong: block the way
-    assert not again.marked_beside and planner.collision_map[agent[0], agent[1] - 4 : agent[1] - 1].all()
+    again = planner.plan(obstacle, agent, into_corner, goal, last_move_m=0.0)  # the map was wrong
+    added = planner.collision_cells[len(marks):]
+    assert again.collided and not again.marked_beside and len(added) >= 9 and (added[:, 1] < agent[1]).all()
+
+
+def test_marks_beside_that_leave_the_failed_step_the_way_on_are_not_laid():
+    """Stockman/0/6: marked beside the obstacle, the plan stepped the same way again and failed again.
+    A step straight along the passage's axis, whose mapped corner the marks beside do not move the
+    way off, keeps the rectangle."""
+    obstacle = _passage(57, 62)
+    planner = LocalPlanner(PlannerConfig(), RES, **BODY)
+    plan = planner.plan(obstacle, (58, 84), math.pi, (58, 20), last_move_m=0.0)
+    marks = planner.collision_cells
+    assert plan.collided and not plan.marked_beside
+    assert (marks[:, 1] < 84).all() and planner.collision_map[58, 80:83].all()
 
 
 @pytest.mark.parametrize("walls, start", [

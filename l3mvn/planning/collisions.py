@@ -66,7 +66,7 @@ class CollisionTracker:
         """Mark the cells ahead as blocked when a forward step moved less than the threshold; with
         ``target`` (approaching the goal object) the narrower target widths apply. With the agent's
         ``obstacle`` map, the first failed step of a run also keeps the cells beside the obstacle
-        it swept nearer to (``can_mark_beside``)."""
+        it swept nearer to (``beside``)."""
         cfg = self.cfg
         collided = False
         self._fresh, self._beside = 0, None
@@ -86,21 +86,19 @@ class CollisionTracker:
         return collided
 
     @property
-    def can_mark_beside(self) -> bool:
-        """Whether the last failed step swept nearer a mapped obstacle, so ``mark_beside`` may replace
-        its rectangle."""
-        return self._beside is not None
+    def beside(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The free cells beside the mapped obstacle the last failed step swept nearer to (the first
+        of a run), an alternative to its rectangle; None when the map does not explain it."""
+        return self._beside
 
-    def mark_beside(self) -> None:
-        """Replace the last step's rectangle with the free cells beside the obstacle it swept nearer to."""
-        if self._beside is None:
-            raise L3MVNError("mark_beside() needs a failed step that swept nearer a mapped obstacle")
+    def swap_last_mark(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Replace the cells the last step marked with ``(rows, cols)``; returns the cells replaced."""
         kept = len(self._cells) - self._fresh
         gone = self._cells[kept:]
         self.map[gone[:, 0], gone[:, 1]] = False
         self._cells = self._cells[:kept]
-        beside, self._beside = self._beside, None
-        self._mark(*beside)
+        self._mark(rows, cols)
+        return gone[:, 0].astype(np.int64), gone[:, 1].astype(np.int64)
 
     def _mark(self, rows: np.ndarray, cols: np.ndarray) -> None:
         fresh = np.unique((rows * self.map.shape[1] + cols)[~self.map[rows, cols]])

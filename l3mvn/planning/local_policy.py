@@ -35,9 +35,9 @@ class Plan:
     replanned: whether this step ran FMM (False when the previous field was still valid).
     marks_cleared: approaching the target, the collision marks lengthened the way to it by more
     than ``target_mark_detour_m`` and were cleared this step (``LocalPlanner.plan``).
-    marked_beside: this step's failed step swept nearer a mapped obstacle, and its rectangle across
-    the way lengthened it by more than ``target_mark_detour_m``: the cells beside the obstacle
-    were marked instead.
+    marked_beside: this step's failed step swept nearer a mapped obstacle, its rectangle across the
+    way lengthened it by more than ``target_mark_detour_m``, and with the cells beside the obstacle
+    marked instead the plan no longer steps straight on: those were marked.
     """
 
     action: Action
@@ -140,14 +140,25 @@ class LocalPlanner:
                                                             dilation)
         d_agent = float(field.at(*agent))
         # Only a replanned field can hold new marks across the way (a reused one provably does not).
-        marked_beside = replanned and self._collisions.can_mark_beside and self._marks_make_detour(
+        beside = self._collisions.beside
+        marked_beside = beside is not None and replanned and self._marks_make_detour(
             obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, d_agent)
         if marked_beside:
-            self._collisions.mark_beside()
+            across = self._collisions.swap_last_mark(*beside)
             self._fields.forget()
             field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols,
                                                                 nearest_goal, dilation)
             d_agent = float(field.at(*agent))
+            if stg is None:
+                stg = self._steering.short_term_goal(field, trav, agent, nearest_goal)
+            if self._steering.steps_towards(agent, heading, stg if stg != agent else nearest_goal):
+                # The marks beside leave the failed step the way on: no explanation the plan can use.
+                marked_beside = False
+                self._collisions.swap_last_mark(*across)
+                self._fields.forget()
+                field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols,
+                                                                    nearest_goal, dilation)
+                d_agent = float(field.at(*agent))
         marks_cleared = (target and replanned and self._target_clears < self.cfg.target_mark_clears
                          and self._marks_make_detour(obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation,
                                                      d_agent))

@@ -64,12 +64,16 @@ class Steering:
             return agent
         return int(rows.flat[best]) + window.r0, int(cols.flat[best]) + window.c0
 
+    def steps_towards(self, agent: tuple[int, int], heading: float, target: tuple[int, int]) -> bool:
+        """Whether ``target`` lies within the turn threshold of ``heading`` (the step goes straight on)."""
+        threshold = math.radians(self.cfg.turn_threshold_deg)
+        return target != agent and abs(_bearing_error(agent, heading, target)) <= threshold
+
     def action(self, agent: tuple[int, int], heading: float, target: tuple[int, int]) -> Action:
         if target == agent:  # standing on the goal cell itself: any turn is harmless
             action = Action.TURN_LEFT
         else:
-            desired = math.atan2(target[0] - agent[0], target[1] - agent[1])
-            error = (desired - heading + math.pi) % (2 * math.pi) - math.pi
+            error = _bearing_error(agent, heading, target)
             threshold = math.radians(self.cfg.turn_threshold_deg)
             action = (Action.TURN_LEFT if error > threshold else Action.TURN_RIGHT if error < -threshold
                       else Action.MOVE_FORWARD)
@@ -81,6 +85,12 @@ class Steering:
                 action = Action.MOVE_FORWARD
         self._last = (agent, action)
         return action
+
+
+def _bearing_error(agent: tuple[int, int], heading: float, target: tuple[int, int]) -> float:
+    """Radians from ``heading`` to the bearing of ``target``, in [-pi, pi)."""
+    desired = math.atan2(target[0] - agent[0], target[1] - agent[1])
+    return (desired - heading + math.pi) % (2 * math.pi) - math.pi
 
 
 def _rays(length_cells: int) -> tuple[np.ndarray, np.ndarray]:
