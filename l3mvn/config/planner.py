@@ -47,7 +47,8 @@ class PlannerConfig:
     # that lengthen the way to it by more than this are cleared, at most this many times an episode
     # (a real obstacle is bumped into again and marked again; the stuck signal still counts). Toward
     # any goal, the first failed step of a run whose rectangle lengthens the way so, and which swept
-    # nearer a mapped obstacle, marks the free cells beside that obstacle instead.
+    # nearer a mapped obstacle, marks the free cells beside that obstacle instead where the plan
+    # then turns off the failed heading (``planning.collisions``).
     target_mark_detour_m: float = 2.0
     target_mark_clears: int = 3
     # Stuck: this many collisions, or less than this displacement, within the last window of steps.

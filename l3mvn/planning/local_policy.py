@@ -143,32 +143,23 @@ class LocalPlanner:
         beside = self._collisions.beside
         marked_beside = beside is not None and replanned and self._marks_make_detour(
             obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, d_agent)
+        replan = (obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation)
         if marked_beside:
             across = self._collisions.swap_last_mark(*beside)
-            self._fields.forget()
-            field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols,
-                                                                nearest_goal, dilation)
-            d_agent = float(field.at(*agent))
+            field, trav, stg, replanned, d_agent = self._field_anew(*replan)
             if stg is None:
                 stg = self._steering.short_term_goal(field, trav, agent, nearest_goal)
             if self._steering.steps_towards(agent, heading, stg if stg != agent else nearest_goal):
                 # The marks beside leave the failed step the way on: no explanation the plan can use.
                 marked_beside = False
                 self._collisions.swap_last_mark(*across)
-                self._fields.forget()
-                field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols,
-                                                                    nearest_goal, dilation)
-                d_agent = float(field.at(*agent))
+                field, trav, stg, replanned, d_agent = self._field_anew(*replan)
         marks_cleared = (target and replanned and self._target_clears < self.cfg.target_mark_clears
-                         and self._marks_make_detour(obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation,
-                                                     d_agent))
+                         and self._marks_make_detour(*replan, d_agent))
         if marks_cleared:
             self._collisions.clear_marks()
-            self._fields.forget()
             self._target_clears += 1
-            field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols,
-                                                                nearest_goal, dilation)
-            d_agent = float(field.at(*agent))
+            field, trav, stg, replanned, d_agent = self._field_anew(*replan)
         reachable = math.isfinite(d_agent)
         if not reachable:
             distance = math.inf
@@ -193,6 +184,13 @@ class LocalPlanner:
             marks_cleared=marks_cleared,
             marked_beside=marked_beside,
         )
+
+    def _field_anew(self, obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation):
+        """``field_to`` after the collision marks changed under the cached field, and the agent's distance."""
+        self._fields.forget()
+        field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols, nearest_goal,
+                                                            dilation)
+        return field, trav, stg, replanned, float(field.at(*agent))
 
     def _marks_make_detour(self, obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, d_agent) -> bool:
         """Whether the collision marks lengthen the way to the goal by more than
