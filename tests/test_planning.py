@@ -328,6 +328,14 @@ def test_marks_beside_that_leave_the_failed_step_the_way_on_are_not_laid():
     marks = planner.collision_cells
     assert plan.collided and not plan.marked_beside
     assert (marks[:, 1] < 84).all() and planner.collision_map[58, 80:83].all()
+    # The trial leaves nothing behind: the same plans as a planner that never tries marks beside.
+    tried, never = LocalPlanner(PlannerConfig(), RES, **BODY), LocalPlanner(PlannerConfig(target_mark_detour_m=1e9),
+                                                                             RES, **BODY)
+    for last_move, heading in ((0.0, math.pi), (None, math.pi / 2), (0.25, math.pi / 2), (0.0, math.pi / 2)):
+        a, b = (p.plan(obstacle, (58, 84), heading, (58, 20), last_move_m=last_move) for p in (tried, never))
+        assert (a.action, a.short_term_goal, a.distance_to_goal_m, a.replanned) == (
+            b.action, b.short_term_goal, b.distance_to_goal_m, b.replanned)
+        assert np.array_equal(tried.collision_map, never.collision_map)
 
 
 @pytest.mark.parametrize("walls, start", [

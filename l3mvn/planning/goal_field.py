@@ -71,6 +71,15 @@ class GoalFields:
         self._cache = {}
         self._narrow_goal = None
 
+    def saved(self) -> tuple:
+        """The cached fields and the clearance choice, for ``restore`` after a trial plan."""
+        return dict(self._cache), self._narrow_goal
+
+    def restore(self, saved: tuple) -> None:
+        """Back to the state ``saved`` returned: a trial plan on other marks leaves nothing behind."""
+        cache, self._narrow_goal = saved
+        self._cache = dict(cache)
+
     def field_to(
         self,
         obstacle: np.ndarray,

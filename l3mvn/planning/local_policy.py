@@ -145,7 +145,8 @@ class LocalPlanner:
             obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, d_agent)
         replan = (obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation)
         if marked_beside:
-            across = self._collisions.swap_last_mark(*beside)
+            across, kept = self._collisions.swap_last_mark(*beside), self._fields.saved()
+            plan_across = field, trav, stg, replanned, d_agent
             field, trav, stg, replanned, d_agent = self._field_anew(*replan)
             if stg is None:
                 stg = self._steering.short_term_goal(field, trav, agent, nearest_goal)
@@ -153,7 +154,8 @@ class LocalPlanner:
                 # The marks beside leave the failed step the way on: no explanation the plan can use.
                 marked_beside = False
                 self._collisions.swap_last_mark(*across)
-                field, trav, stg, replanned, d_agent = self._field_anew(*replan)
+                self._fields.restore(kept)
+                field, trav, stg, replanned, d_agent = plan_across
         marks_cleared = (target and replanned and self._target_clears < self.cfg.target_mark_clears
                          and self._marks_make_detour(*replan, d_agent))
         if marks_cleared:
