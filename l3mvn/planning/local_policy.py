@@ -140,10 +140,9 @@ class LocalPlanner:
                                                             dilation)
         d_agent = float(field.at(*agent))
         # Only a replanned field can hold new marks across the way (a reused one provably does not).
-        beside = self._collisions.beside
-        marked_beside = beside is not None and replanned and self._marks_make_detour(
-            obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, d_agent)
         replan = (obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation)
+        beside = self._collisions.beside
+        marked_beside = beside is not None and replanned and self._marks_make_detour(*replan, d_agent)
         if marked_beside:
             across, kept = self._collisions.swap_last_mark(*beside), self._fields.saved()
             plan_across = field, trav, stg, replanned, d_agent
