@@ -436,8 +436,7 @@ def test_a_kept_frontier_names_why_it_was_chosen_once_not_once_per_keep():
     from l3mvn.policies.global_policies import Selection
 
     config = Config()
-    goals = ExplorationGoals(NearestFrontier(), config, LocalPlanner(config.planner, config.map.resolution_m, body_radius_m=config.sim.agent_radius_m,
-                                  forward_step_m=config.sim.forward_step_m))
+    goals = ExplorationGoals(NearestFrontier(), config, LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim))
     cells = np.zeros((1, 2), np.int64)
     goals.frontiers = [Frontier(k, cells, (100, 100 + 40 * k), 5, 1.0, 1.0, 1.0, 0.5) for k in range(2)]
     goals.cell, goals.frontier = (100, 100), 0
@@ -472,8 +471,7 @@ def test_a_frontier_too_near_for_a_new_list_is_looked_beyond_before_the_timer_ch
                            resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=agent_cell, agent_heading=0.0,
                            local_cells=n, footprint_radius_cells=3)
 
-    goals = ExplorationGoals(NearestFrontier(), config, LocalPlanner(config.planner, config.map.resolution_m, body_radius_m=config.sim.agent_radius_m,
-                                  forward_step_m=config.sim.forward_step_m))
+    goals = ExplorationGoals(NearestFrontier(), config, LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim))
     goals.reselect(at((100, 80)), "toilet", np.random.default_rng(0))
     assert goals.kind == GoalKind.FRONTIER and goals.cell[0] < 62  # the door, 2.6 m away
     door = goals.cell

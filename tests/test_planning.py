@@ -14,12 +14,12 @@ from l3mvn.planning import LocalPlanner, Window, distance_field
 from l3mvn.types import Action
 
 RES = 0.05
-BODY = {"body_radius_m": SimConfig().agent_radius_m, "forward_step_m": SimConfig().forward_step_m}
+SIM = SimConfig()
 
 
 def _planner() -> LocalPlanner:
     """SemExp's planner: obstacles grown by disk(3), on 5 cm cells."""
-    return LocalPlanner(PlannerConfig(obstacle_dilation_cells=3), RES, **BODY)
+    return LocalPlanner.for_sim(PlannerConfig(obstacle_dilation_cells=3), RES, SIM)
 
 
 def _room(size: int = 120) -> np.ndarray:
@@ -254,7 +254,7 @@ def test_a_failed_step_towards_the_target_leaves_the_passage_beside_it_open():
     obstacle[:, 33] = True
     obstacle[57:64, 33] = False  # passable rows 58-62 once the wall grows by a cell
     for target, widths_open in ((False, [False, False]), (True, [True, True])):
-        planner = LocalPlanner(PlannerConfig(), RES, **BODY)
+        planner = LocalPlanner.for_sim(PlannerConfig(), RES, SIM)
         planner.plan(obstacle, (60, 30), 0.0, (60, 100), target=target)
         for still_open in widths_open:
             plan = planner.plan(obstacle, (60, 30), 0.0, (60, 100), last_move_m=0.0, target=target)
@@ -273,9 +273,10 @@ def test_marks_that_force_a_detour_to_the_target_are_cleared_a_few_times_an_epis
     obstacle[105:112, 33] = False  # the way round
     collisions = 12
     cfg = PlannerConfig(stuck_collisions=collisions)
-    straight = LocalPlanner(cfg, RES, **BODY).plan(obstacle, (60, 30), 0.0, (60, 100), target=True).distance_to_goal_m
+    straight = LocalPlanner.for_sim(cfg, RES, SIM).plan(obstacle, (60, 30), 0.0, (60, 100), target=True)
+    straight = straight.distance_to_goal_m
     for target in (False, True):
-        planner = LocalPlanner(cfg, RES, **BODY)
+        planner = LocalPlanner.for_sim(cfg, RES, SIM)
         planner.plan(obstacle, (60, 30), 0.0, (60, 100), target=target)
         cleared = []
         for _ in range(collisions):
@@ -305,8 +306,9 @@ def test_a_step_into_a_mapped_corner_marks_beside_it_when_a_mark_across_would_sh
     failed step in a row still blocks the way ahead."""
     obstacle = _passage(57, 62)  # rows 57-61 free
     agent, into_corner, goal = (59, 84), math.pi + 0.3, (60, 20)  # 17 degrees towards the lower block
-    open_way = LocalPlanner(PlannerConfig(), RES, **BODY).plan(obstacle, agent, into_corner, goal).distance_to_goal_m
-    planner = LocalPlanner(PlannerConfig(), RES, **BODY)
+    open_way = LocalPlanner.for_sim(PlannerConfig(), RES, SIM).plan(obstacle, agent, into_corner, goal)
+    open_way = open_way.distance_to_goal_m
+    planner = LocalPlanner.for_sim(PlannerConfig(), RES, SIM)
     plan = planner.plan(obstacle, agent, into_corner, goal, last_move_m=0.0)
     marks = planner.collision_cells
     assert plan.collided and plan.marked_beside and len(marks) and plan.action != Action.MOVE_FORWARD
@@ -323,14 +325,14 @@ def test_marks_beside_that_leave_the_failed_step_the_way_on_are_not_laid():
     A step straight along the passage's axis, whose mapped corner the marks beside do not move the
     way off, keeps the rectangle."""
     obstacle = _passage(57, 62)
-    planner = LocalPlanner(PlannerConfig(), RES, **BODY)
+    planner = LocalPlanner.for_sim(PlannerConfig(), RES, SIM)
     plan = planner.plan(obstacle, (58, 84), math.pi, (58, 20), last_move_m=0.0)
     marks = planner.collision_cells
     assert plan.collided and not plan.marked_beside
     assert (marks[:, 1] < 84).all() and planner.collision_map[58, 80:83].all()
     # The trial leaves nothing behind: the same plans as a planner that never tries marks beside.
-    tried, never = LocalPlanner(PlannerConfig(), RES, **BODY), LocalPlanner(PlannerConfig(target_mark_detour_m=1e9),
-                                                                             RES, **BODY)
+    tried = LocalPlanner.for_sim(PlannerConfig(), RES, SIM)
+    never = LocalPlanner.for_sim(PlannerConfig(target_mark_detour_m=1e9), RES, SIM)
     for last_move, heading in ((0.0, math.pi), (None, math.pi / 2), (0.25, math.pi / 2), (0.0, math.pi / 2)):
         a, b = (p.plan(obstacle, (58, 84), heading, (58, 20), last_move_m=last_move) for p in (tried, never))
         assert (a.action, a.short_term_goal, a.distance_to_goal_m, a.replanned) == (
@@ -344,7 +346,7 @@ def test_marks_beside_that_leave_the_failed_step_the_way_on_are_not_laid():
     (_passage(55, 64), (58, 84)),  # a wide passage the rectangle leaves open
 ])
 def test_a_step_the_map_cannot_explain_or_whose_mark_leaves_the_way_open_blocks_the_way_ahead(walls, start):
-    planner = LocalPlanner(PlannerConfig(), RES, **BODY)
+    planner = LocalPlanner.for_sim(PlannerConfig(), RES, SIM)
     plan = planner.plan(walls, start, math.pi, (60, 20), last_move_m=0.0)
     ahead = planner.collision_cells
     assert plan.collided and not plan.marked_beside
@@ -358,8 +360,8 @@ def test_the_way_keeps_a_cell_more_off_walls_where_the_floor_allows():
     cfg = PlannerConfig()
     edge = 1 + cfg.obstacle_dilation_cells  # the first row the body's growth leaves free below the wall
     agent, goal = (edge, 10), (edge, 110)
-    hugging = LocalPlanner(PlannerConfig(clearance_cells=0), RES, **BODY).plan(obstacle, agent, 0.0, goal)
-    clear = LocalPlanner(cfg, RES, **BODY).plan(obstacle, agent, 0.0, goal)
+    hugging = LocalPlanner.for_sim(PlannerConfig(clearance_cells=0), RES, SIM).plan(obstacle, agent, 0.0, goal)
+    clear = LocalPlanner.for_sim(cfg, RES, SIM).plan(obstacle, agent, 0.0, goal)
     assert hugging.short_term_goal[0] == edge
     assert clear.short_term_goal[0] >= edge + cfg.clearance_cells
     assert clear.reachable and clear.distance_to_goal_m == pytest.approx(hugging.distance_to_goal_m, abs=0.15)
@@ -374,8 +376,9 @@ def test_a_passage_only_the_body_fits_is_taken_unless_the_clear_way_is_barely_lo
     obstacle[59:62, 60] = False  # row 60 passes the body's growth only
     obstacle[round_rows[0] : round_rows[1], 60] = False
     cfg = PlannerConfig()
-    body_only = LocalPlanner(PlannerConfig(clearance_cells=0), RES, **BODY).plan(obstacle, (60, 30), 0.0, (60, 100))
-    plan = LocalPlanner(cfg, RES, **BODY).plan(obstacle, (60, 30), 0.0, (60, 100))
+    body_only = LocalPlanner.for_sim(PlannerConfig(clearance_cells=0), RES, SIM)
+    body_only = body_only.plan(obstacle, (60, 30), 0.0, (60, 100))
+    plan = LocalPlanner.for_sim(cfg, RES, SIM).plan(obstacle, (60, 30), 0.0, (60, 100))
     if narrow:
         assert plan.distance_to_goal_m == pytest.approx(body_only.distance_to_goal_m, abs=1e-4)
     else:
@@ -407,7 +410,7 @@ def test_forward_step_that_moved_enough_is_not_a_collision():
 
 def test_repeated_collisions_raise_stuck():
     cfg = PlannerConfig(stuck_collisions=5, stuck_window_steps=50)
-    planner = LocalPlanner(cfg, RES, **BODY)
+    planner = LocalPlanner.for_sim(cfg, RES, SIM)
     flags = [
         planner.plan(_room(), (60, 30), 0.0, (60, 100), last_move_m=0.0).stuck for _ in range(5)
     ]
@@ -416,7 +419,7 @@ def test_repeated_collisions_raise_stuck():
 
 def test_no_progress_over_the_window_raises_stuck():
     cfg = PlannerConfig(stuck_window_steps=10, stuck_collisions=10, stuck_min_displacement_m=0.5)
-    planner = LocalPlanner(cfg, RES, **BODY)
+    planner = LocalPlanner.for_sim(cfg, RES, SIM)
     flags = [planner.plan(_room(), (60, 30 + i % 2), 0.0, (60, 100)).stuck for i in range(10)]
     assert flags == [False] * 9 + [True]
     planner.reset()
@@ -457,7 +460,7 @@ def test_reached_is_true_only_within_the_radius():
 def test_small_goal_dilation_keeps_a_goal_behind_a_thin_wall_from_reading_as_reached():
     obstacle = _room()
     obstacle[:100, 64] = True  # a one-cell wall, its door at the far end
-    planner = LocalPlanner(PlannerConfig(obstacle_dilation_cells=1), RES, **BODY)
+    planner = LocalPlanner.for_sim(PlannerConfig(obstacle_dilation_cells=1), RES, SIM)
     through_wall = planner.plan(obstacle, (40, 58), 0.0, (40, 70), goal_reached_radius_m=0.75)
     assert through_wall.reached  # the 0.5 m object disk reaches across the wall
     planner.reset()
@@ -547,3 +550,9 @@ def test_closed_loop_agent_gets_around_an_obstacle_missing_from_its_map():
             heading += math.radians(30 if plan.action == Action.TURN_LEFT else -30)
     assert plan.reached
     assert planner.collision_map.any()
+
+
+@pytest.mark.parametrize("body, step", [(-0.1, 0.25), (0.18, 0.0), (float("nan"), 0.25)])
+def test_a_body_no_step_can_sweep_is_refused_in_one_line(body, step):
+    with pytest.raises(L3MVNError, match=r"need body_radius_m >= 0 and forward_step_m > 0, got"):
+        LocalPlanner(PlannerConfig(), RES, body_radius_m=body, forward_step_m=step)

@@ -43,8 +43,7 @@ class MapAgent:
         self.categories = categories
         self.sim = config.sim
         self.seed = seed
-        self.planner = LocalPlanner(config.planner, config.map.resolution_m, body_radius_m=config.sim.agent_radius_m,
-                                    forward_step_m=config.sim.forward_step_m)
+        self.planner = LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim)
         self.noise = SegmentationNoise(config.policy.seg_noise, len(categories), seed)
         self.target = TargetSearch(config.agent)
         self.explore = ExplorationGoals(global_policy, config, self.planner)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from l3mvn.config import PlannerConfig
+from l3mvn.config import PlannerConfig, SimConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.planning.collisions import CollisionTracker
 from l3mvn.planning.fmm import GeodesicField
@@ -74,6 +74,11 @@ class LocalPlanner:
         self.goal_dilation_cells = self._fields.goal_dilation_cells
         self.lookahead_cells = self._steering.lookahead_cells
         self._target_clears = 0  # clears of detour-making marks this episode (``target_mark_clears``)
+
+    @classmethod
+    def for_sim(cls, cfg: PlannerConfig, resolution_m: float, sim: SimConfig) -> "LocalPlanner":
+        """A planner for the simulated robot's body and step, on maps of ``resolution_m`` cells."""
+        return cls(cfg, resolution_m, body_radius_m=sim.agent_radius_m, forward_step_m=sim.forward_step_m)
 
     def reset(self) -> None:
         """Forget the collision map, the cached field, the stuck history and the last turn (new episode)."""
