@@ -28,6 +28,10 @@ class PlannerConfig:
     # straight free line within this distance; 0.25 m gives SemExp's ring.
     stg_lookahead_m: float = 1.0
     turn_threshold_deg: float = 15.0
+    # Hysteresis: after a forward step that moved, the agent steps on while the short-term goal lies
+    # within this angle of its heading and the step is free and downhill on the field; turns bring
+    # it back within ``turn_threshold_deg``. 30 is one turn: the heading either side of a path.
+    keep_heading_deg: float = 30.0
     collision_threshold_m: float = 0.10
     # A failed forward step blocks a rectangle ahead of the agent: it starts this many cells ahead,
     # is this long, and this wide, widening by 2 cells per consecutive collision up to the maximum.
@@ -81,3 +85,5 @@ class PlannerConfig:
             raise L3MVNError("stuck_collisions cannot exceed stuck_window_steps (it could never trigger)")
         if self.turn_threshold_deg >= 180:
             raise L3MVNError(f"turn_threshold_deg must be below 180, got {self.turn_threshold_deg}")
+        if not self.turn_threshold_deg <= self.keep_heading_deg < 90:
+            raise L3MVNError(f"keep_heading_deg must lie in [turn_threshold_deg, 90), got {self.keep_heading_deg}")

@@ -68,7 +68,7 @@ class LocalPlanner:
             raise L3MVNError(f"resolution_m must be positive, got {resolution_m}")
         self.cfg, self.resolution_m = cfg, resolution_m
         self._body = {"body_radius_m": body_radius_m, "forward_step_m": forward_step_m}
-        self._steering = Steering(cfg, resolution_m)
+        self._steering = Steering(cfg, resolution_m, forward_step_m)
         self._collisions = CollisionTracker(cfg, resolution_m, **self._body)
         self._fields = GoalFields(cfg, resolution_m, self._steering, self._collisions)
         self.goal_dilation_cells = self._fields.goal_dilation_cells
@@ -176,7 +176,7 @@ class LocalPlanner:
             distance = math.dist(nearest_goal, agent) * self.resolution_m
         if stg is None:
             stg = self._steering.short_term_goal(field, trav, agent, nearest_goal)
-        action = self._steering.action(agent, heading, stg if stg != agent else nearest_goal)
+        action = self._steering.action(agent, heading, stg if stg != agent else nearest_goal, field, trav)
         return Plan(
             action=action,
             short_term_goal=stg,

@@ -29,10 +29,12 @@ _TURN_BACK = {Action.TURN_LEFT: Action.TURN_RIGHT, Action.TURN_RIGHT: Action.TUR
 class Steering:
     """Short-term goal and discrete action on a distance field (one per planner)."""
 
-    def __init__(self, cfg: PlannerConfig, resolution_m: float) -> None:
+    def __init__(self, cfg: PlannerConfig, resolution_m: float, forward_step_m: float) -> None:
         self.cfg, self.resolution_m = cfg, resolution_m
         self.lookahead_cells = max(1, int(round(cfg.stg_lookahead_m / resolution_m)))
         self._ray_rows, self._ray_cols = _rays(self.lookahead_cells)
+        # Samples of one forward step (origin excluded), half a cell apart as the rays are.
+        self._step = np.arange(_RAY_STEP_CELLS, forward_step_m / resolution_m + 1e-9, _RAY_STEP_CELLS)
         self._last: tuple[tuple[int, int], Action] | None = None  # the cell and action of the last choice
 
     def reset(self) -> None:
@@ -69,7 +71,10 @@ class Steering:
         threshold = math.radians(self.cfg.turn_threshold_deg)
         return target != agent and abs(_bearing_error(agent, heading, target)) <= threshold
 
-    def action(self, agent: tuple[int, int], heading: float, target: tuple[int, int]) -> Action:
+    def action(self, agent: tuple[int, int], heading: float, target: tuple[int, int], field: GeodesicField,
+               trav: np.ndarray) -> Action:
+        """Turn toward ``target`` or step; ``field`` and its traversible window ``trav`` tell whether a
+        step that moved may be followed by another off the turn threshold (``_keeps_heading``)."""
         if target == agent:  # standing on the goal cell itself: any turn is harmless
             action = Action.TURN_LEFT
         else:
@@ -77,6 +82,8 @@ class Steering:
             threshold = math.radians(self.cfg.turn_threshold_deg)
             action = (Action.TURN_LEFT if error > threshold else Action.TURN_RIGHT if error < -threshold
                       else Action.MOVE_FORWARD)
+            if action != Action.MOVE_FORWARD and self._keeps_heading(agent, heading, error, field, trav):
+                action = Action.MOVE_FORWARD
             # A turn straight back on the same cell undoes the last one. It happens when the goal moves
             # with the view (a sighting's bearing shifts as the frame does): the two headings then take
             # turns for ever (Lindenwood/0/7, 48 steps). Within two thresholds of the goal, step instead.
@@ -85,6 +92,28 @@ class Steering:
                 action = Action.MOVE_FORWARD
         self._last = (agent, action)
         return action
+
+    def _keeps_heading(self, agent: tuple[int, int], heading: float, error: float, field: GeodesicField,
+                       trav: np.ndarray) -> bool:
+        """Whether the agent, having just stepped forward off its last cell, steps on rather than turn:
+        the short-term goal lies within ``keep_heading_deg``, the step's cells are traversible and
+        it ends nearer the goal on ``field``. A path between two headings otherwise flips the bearing
+        error across ``turn_threshold_deg`` at every step, and the agent turned left, stepped,
+        turned right, stepped (frontier's Stockman/0/4 at 480x640: 198 of its 500 steps were turns
+        along its paths)."""
+        if self._last is None:
+            return False
+        cell, last = self._last
+        if last != Action.MOVE_FORWARD or cell == agent or abs(error) > math.radians(self.cfg.keep_heading_deg):
+            return False
+        window = field.window
+        rows = np.rint(agent[0] + math.sin(heading) * self._step).astype(np.int64)
+        cols = np.rint(agent[1] + math.cos(heading) * self._step).astype(np.int64)
+        if not window.inside(rows, cols).all():
+            return False
+        if not trav[rows - window.r0, cols - window.c0].all():
+            return False
+        return bool(field.at(rows[-1], cols[-1]) < field.at(*agent))
 
 
 def _bearing_error(agent: tuple[int, int], heading: float, target: tuple[int, int]) -> float:
