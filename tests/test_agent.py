@@ -481,3 +481,47 @@ def test_a_frontier_too_near_for_a_new_list_is_looked_beyond_before_the_timer_ch
     near = at((door[0] + 7, door[1]))  # 0.35 m from the door
     assert all(f.center[0] > 62 for f in goals._extract(near))  # why it matters: the door is gone
     assert not goals.due(near)
+
+
+def test_with_no_other_frontier_left_the_edge_beside_guessed_obstacles_is_one():
+    """Newfields/0/3 (nearest frontier, 480x640): depth too near to read at a door frame put guessed
+    obstacles just through the door, the frontier there shrank below ``min_cluster_cells``, the map
+    had no frontier left, and the agent drew unreachable random cells for 75 steps. Guesses are the
+    weakest evidence on the map: once nothing else is left unknown, the edge beside them is a
+    frontier (the planner still walks round them)."""
+    from l3mvn.agent.exploration import ExplorationGoals
+    from l3mvn.events import GoalKind
+    from l3mvn.planning import LocalPlanner
+
+    config = Config()
+    n = 200
+    explored = np.zeros((n, n), bool)
+    explored[58:142, 38:142] = True  # a closed room ...
+    obstacle = np.zeros((n, n), bool)
+    obstacle[58:61, 38:142] = obstacle[139:142, 38:142] = obstacle[58:142, 38:41] = obstacle[58:142, 139:142] = True
+    obstacle[58:61, 84:100] = False  # ... with a door to the north, 0.8 m wide
+    inferred = np.zeros((n, n), bool)
+    inferred[57, 83:101] = True  # guesses just beyond it, on unknown floor
+    inferred[45:57, 90] = True  # and a ray of them
+    obstacle |= inferred
+
+    def goals_at(guesses, obstacle=obstacle):
+        sem_map = SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros_like(explored),
+                              categories=np.zeros((1, n, n), bool), category_names=("toilet",), looked=explored,
+                              resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=(110, 90), agent_heading=0.0,
+                              local_cells=n, footprint_radius_cells=3, inferred=guesses)
+        goals = ExplorationGoals(NearestFrontier(), config,
+                                 LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim))
+        goals.reselect(sem_map, "toilet", np.random.default_rng(0))
+        return goals
+
+    goals = goals_at(inferred)
+    assert goals.kind == GoalKind.FRONTIER and goals.cell[0] < 62  # the door
+    assert abs(goals.cell[1] - 92) <= 8
+    # The same cells seen by depth are a wall across the door: no frontier there.
+    assert not any(f.center[0] < 62 for f in goals_at(None).frontiers)
+    # While another way out is left, the guesses stand.
+    south = obstacle.copy()
+    south[139:142, 60:76] = False
+    goals = goals_at(inferred, south)
+    assert goals.frontiers and all(f.center[0] > 130 for f in goals.frontiers)

@@ -89,6 +89,13 @@ class ExplorationGoals:
             self.cell, self.kind, self.frontier = look, GoalKind.LOOK, None
             self.reason = "no frontier left: looking at floor seen only from afar"
             return (time.perf_counter() - t0) * 1e3, 0.0
+        if not self.frontiers and sem_map.inferred is not None and sem_map.inferred.any():
+            # Nothing left unknown but beyond guessed obstacles (depth nearer than the sensor reads),
+            # the weakest evidence on the map: through a door frame they cut its frontier below
+            # ``min_cluster_cells``, and the agent drew unreachable random cells for 75-160 steps
+            # (Newfields/0/3, Mifflinburg/0/0). The edge beside a guess is a frontier then; the
+            # planner still walks round the guesses, and seeing the floor beyond takes them back.
+            self.frontiers = self._extract(sem_map, sem_map.seen_obstacle)
         if not self.frontiers and self.blocked:
             # Every frontier left was reached once and is still there (the camera could not clear
             # it from where the agent stood): visiting them again beats wandering at random.
@@ -105,7 +112,9 @@ class ExplorationGoals:
         return look_goal(sem_map, self.planner, self.blocked, self.blocked_radius_cells(sem_map.resolution_m),
                          self.cfg.look_min_area_m2)
 
-    def _extract(self, sem_map: SemanticMap) -> list[Frontier]:
+    def _extract(self, sem_map: SemanticMap, obstacle: np.ndarray | None = None) -> list[Frontier]:
+        """Frontiers of the map, cut where ``obstacle`` (default: the map's, guesses included) lies."""
+        obstacle = sem_map.obstacle if obstacle is None else obstacle
         # The field must cover every explored cell: frontiers far from any obstacle (the open end of
         # a corridor) would otherwise read as unreachable and be dropped.
         rows = np.flatnonzero(sem_map.explored.any(axis=1))
@@ -114,7 +123,7 @@ class ExplorationGoals:
         corners = np.array([[max(rows[0] - 1, 0), max(cols[0] - 1, 0)],
                             [min(rows[-1] + 1, last), min(cols[-1] + 1, last)]])
         field_ = self.planner.distance_from_agent(sem_map.obstacle, sem_map.agent_cell, targets=corners).full()
-        return extract_frontiers(sem_map.explored, sem_map.obstacle, sem_map.agent_cell, field_,
+        return extract_frontiers(sem_map.explored, obstacle, sem_map.agent_cell, field_,
                                  sem_map.categories, sem_map.category_names, self.config.frontiers,
                                  resolution_m=sem_map.resolution_m,
                                  blocked=np.array(self.blocked, dtype=np.int64).reshape(-1, 2),

@@ -70,6 +70,11 @@ class SemanticMap:
         grid[rr, cc] = True
         return grid
 
+    @property
+    def seen_obstacle(self) -> np.ndarray:
+        """``obstacle`` less its guesses (``inferred``): the obstacles depth actually hit (allocates)."""
+        return self.obstacle if self.inferred is None else self.obstacle & ~self.inferred
+
     def in_bounds(self, row: int, col: int) -> bool:
         return 0 <= row < self.size and 0 <= col < self.size
 
