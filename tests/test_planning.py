@@ -484,6 +484,9 @@ def test_bad_inputs_raise_clear_errors():
         planner.plan(_room(100), (60, 60), 0.0, (60, 70))
     with pytest.raises(L3MVNError, match="positive"):
         PlannerConfig(stg_lookahead_m=0.0)
+    for keep in (10.0, 90.0, float("nan")):  # below the turn threshold, square to the goal, or no angle
+        with pytest.raises(L3MVNError, match=r"keep_heading_deg must lie in \[turn_threshold_deg \(15\), 90\), got"):
+            PlannerConfig(keep_heading_deg=keep)
 
 
 def _drive(obstacle: np.ndarray, start: tuple[float, float, float], goal: tuple[int, int], steps: int,
@@ -553,7 +556,7 @@ def test_a_step_that_moved_keeps_its_heading_while_the_goal_lies_within_keep_hea
         planner = LocalPlanner.for_sim(PlannerConfig(obstacle_dilation_cells=3, keep_heading_deg=keep), RES, SIM)
         heading = math.radians(-30)
         assert planner.plan(_room(), (50, 20), heading, (40, 37)).action == Action.MOVE_FORWARD
-        # One cell on, the goal lies 29 degrees off the heading.
+        # A step on, the goal lies 29 degrees off the heading.
         assert planner.plan(_room(), (49, 22), heading, (48, 100)).action == second
         # Where the last step failed (the same cell), the agent turns.
         assert planner.plan(_room(), (49, 22), heading, (48, 100)).action == Action.TURN_LEFT

@@ -88,4 +88,5 @@ class PlannerConfig:
         if self.turn_threshold_deg >= 180:
             raise L3MVNError(f"turn_threshold_deg must be below 180, got {self.turn_threshold_deg}")
         if not self.turn_threshold_deg <= self.keep_heading_deg < 90:
-            raise L3MVNError(f"keep_heading_deg must lie in [turn_threshold_deg, 90), got {self.keep_heading_deg}")
+            raise L3MVNError(f"keep_heading_deg must lie in [turn_threshold_deg ({self.turn_threshold_deg:g}), 90), "
+                             f"got {self.keep_heading_deg}")
