@@ -542,9 +542,8 @@ def test_a_path_between_two_headings_is_walked_without_turning_at_every_step(bea
     turns = {}
     for keep in (15.0, 30.0):
         planner = LocalPlanner.for_sim(PlannerConfig(obstacle_dilation_cells=3, keep_heading_deg=keep), RES, SIM)
-        steps, _, actions = _drive(_room(200), (1.0, 1.0, 0.0), goal, steps=200, planner=planner)
+        _, _, actions = _drive(_room(200), (1.0, 1.0, 0.0), goal, steps=200, planner=planner)
         turns[keep] = sum(a != Action.MOVE_FORWARD for a in actions)
-        assert steps == len(actions)
     # 7.5 m is 30 steps: aligning takes up to 2 turns, and a heading 15 degrees off drifts enough
     # for one or two more on the way.
     assert turns[30.0] <= 4
