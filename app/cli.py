@@ -33,11 +33,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="override any config field, as for `l3mvn eval` (`l3mvn config` lists them)")
     parser.add_argument("--speed", type=float, default=4.0, help="steps per second while running (default 4)")
     parser.add_argument("--record", action="store_true", help="record each episode to recordings/*.rrd")
-    parser.add_argument("--record-dir", default="recordings", help="where --record writes (default recordings/)")
+    parser.add_argument("--record-dir", default=None, metavar="DIR",
+                        help="where --record and the Results panel's re-runs write (default: recordings/ for "
+                             "--record, reruns/ beside --recordings for re-runs; never the eval's recordings)")
     parser.add_argument("--results", default=None, metavar="DIR",
                         help="add a Results panel over the eval result files (*.jsonl) in DIR")
     parser.add_argument("--recordings", default=None, metavar="DIR",
-                        help="where the Results panel finds episode recordings (default: --record-dir)")
+                        help="where the Results panel reads the eval's recordings (default recordings/, "
+                             "where `l3mvn eval --record` writes); never written to")
 
 
 def run(args: argparse.Namespace) -> int:

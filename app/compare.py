@@ -25,7 +25,7 @@ from app.map_image import png_bytes, png_rgb
 from l3mvn.config import Config
 from l3mvn.errors import L3MVNError, first_line
 from l3mvn.eval.job import EvalJob
-from l3mvn.recording.catalogue import find_recording
+from l3mvn.recording.catalogue import recording_path, unique_tag
 from l3mvn.recording.video import (
     FONT, PANEL_BG, TEXT_RGB, RecordedEpisode, VideoOptions, fit_text, frames, read_episode,
 )
@@ -234,11 +234,12 @@ def run_side(source: EpisodeSource, key: str, contender: Contender, record_dir: 
     """Run episode ``key`` with ``contender`` as ``l3mvn eval`` would, recorded; the recording's path."""
     folder = side_folder(record_dir, _job(source, contender, None).config_hash)  # creating a job loads nothing
     job = episode_job(source, contender, key, folder)
-    row = job.run_one(key)
+    tag = unique_tag("compare")
+    row = job.run_one(key, record_tag=tag)
     if "error" in row:
         raise L3MVNError(f"running {key} with {contender.policy} failed: {first_line(str(row['error']))}")
-    found = find_recording(folder, row["scene"], int(row["episode_id"]), contender.policy)
-    if found is None:
+    found = recording_path(folder, job.load().name, row["scene"], int(row["episode_id"]), contender.policy, tag)
+    if not found.is_file():
         raise L3MVNError(f"running {key} with {contender.policy} wrote no recording in {folder}")
     return found
 

@@ -15,7 +15,6 @@ import itertools
 import logging
 import threading
 from collections.abc import Callable
-from html import escape
 from pathlib import Path
 
 import numpy as np
@@ -32,10 +31,10 @@ from app.compare import (
     side_folder,
 )
 from app.map_image import png_bytes
+from app.page_text import html, md
 from app.results import EpisodeRow, recording_of, rerun
 from l3mvn.config import Config
 from l3mvn.errors import L3MVNError, first_line
-from l3mvn.recording.catalogue import find_recording
 from l3mvn.types import Episode
 
 log = logging.getLogger(__name__)
@@ -51,11 +50,11 @@ def main_view_html(rgb: np.ndarray, title: str, *, main_view: bool,
     """``rgb`` as a PNG in the page (lossless: the page receives exactly these pixels): over the main
     view (left of the control panel, scaled to fill it, under a title bar), or in the panel at its width."""
     src = "data:image/png;base64," + base64.b64encode(png_bytes(rgb)).decode("ascii")
-    img = f"<img class='l3mvn-picture' alt='{escape(title)}' src='{src}' style='max-width:100%;max-height:100%;"
+    img = f"<img class='l3mvn-picture' alt='{html(title)}' src='{src}' style='max-width:100%;max-height:100%;"
     if not main_view:
         return f"<div>{img}display:block'></div>"
-    head = (f"<div style='color:#eee;font:600 14px sans-serif;padding:6px 10px'>{escape(title)} "
-            f"<span style='font-weight:400;color:#aaa'>({escape(note)})</span></div>")
+    head = (f"<div style='color:#eee;font:600 14px sans-serif;padding:6px 10px'>{html(title)} "
+            f"<span style='font-weight:400;color:#aaa'>({html(note)})</span></div>")
     return (f"<div class='l3mvn-main-view' style='position:fixed;left:0;top:0;bottom:0;"
             f"width:calc(100vw - 440px);z-index:{10 + next(_ORDER)};background:#181818;display:flex;"
             f"flex-direction:column'>{head}<div style='flex:1;min-height:0;display:flex;align-items:center;"
@@ -157,10 +156,7 @@ class ComparePanel:
             s = self.source
             done = rerun(row.raw, dataset=s.dataset, split=s.split, houses=s.houses,
                          episodes_per_house=s.episodes_per_house, seed=s.seed, record_dir=folder)
-            found = find_recording(folder, row.scene, row.episode_id, row.policy)
-            if found is None:
-                raise L3MVNError(f"re-running line {row.index} wrote no recording in {folder}")
-            paths.append(found)
+            paths.append(done.recording)
             log.info("compare: %s", done.summary)
         progress("reading both recordings")
         return compare_recordings(paths[0], paths[1], str(a.raw["key"]))
@@ -203,7 +199,7 @@ class ComparePanel:
             self.step.max = max(1, c.steps - 1)  # a slider needs two ends; show() clamps
             self.step.value = 0
             self.jump.disabled = c.first_difference is None
-            self.difference.content = f"**{c.difference_line}**"
+            self.difference.content = f"**{md(c.difference_line)}**"
         self.show(0)
 
     def _hold(self, held: bool, status: str) -> None:
@@ -212,7 +208,7 @@ class ComparePanel:
         if not held:
             self.step.disabled = self.comparison is None
             self.jump.disabled = self.comparison is None or self.comparison.first_difference is None
-        self.status.content = status
+        self.status.content = md(status)
 
     # --- output ------------------------------------------------------------------------------
     def show(self, step: int) -> None:
@@ -224,4 +220,4 @@ class ComparePanel:
         step = min(max(step, 0), c.steps - 1)
         title = f"Compare {c.episode_key} (find {c.goal}), step {step}: A {c.a.label[3:]} | B {c.b.label[3:]}"
         self.picture.content = main_view_html(c.picture(step), title, main_view=self.main_view.value)
-        self.lines.content = f"{c.a.decision_line(step)}\n\n{c.b.decision_line(step)}"
+        self.lines.content = f"{md(c.a.decision_line(step))}\n\n{md(c.b.decision_line(step))}"

@@ -19,6 +19,7 @@ import viser
 
 from app.compare_view import main_view_html
 from app.map_image import png_bytes, png_rgb, score_color
+from app.page_text import md
 from app.state import MapView, Snapshot
 from l3mvn.errors import L3MVNError
 
@@ -106,7 +107,7 @@ class HistoryPanel:
             line = self._lines[step]
         self.picture.content = main_view_html(picture, f"Looking back: {line[:120]}", main_view=True,
                                               note="press Back to live in Episode history for the live map")
-        self.line.content = line
+        self.line.content = md(line)
         self.live.disabled = False
 
     def _back_to_live(self) -> None:
@@ -116,7 +117,7 @@ class HistoryPanel:
         if steps:
             self.step.value = steps[-1]
             with self._lock:
-                self.line.content = f"live: {self._lines[steps[-1]]}"
+                self.line.content = f"live: {md(self._lines[steps[-1]])}"
 
     # --- the encoder -------------------------------------------------------------------------
     def _encode_loop(self) -> None:
@@ -145,7 +146,7 @@ class HistoryPanel:
             self.step.disabled = False
             if not looking_back or fresh:
                 self.step.value = last
-                self.line.content = f"live: {line}"
+                self.line.content = f"live: {md(line)}"
 
 
 def history_picture(view: MapView) -> np.ndarray:

@@ -9,8 +9,7 @@ the view only assigns the string.
 
 from __future__ import annotations
 
-from html import escape
-
+from app.page_text import html
 from app.state import FrontierMarker, MapView
 from l3mvn.frontiers import Fusion
 from l3mvn.registry import ALIASES, LANGUAGE_POLICIES
@@ -30,10 +29,10 @@ def language_html(view: MapView | None, policy: str, *, shown: int = SHOWN_FRONT
     one card per shown frontier (chosen first)."""
     if not uses_language(policy):
         names = ", ".join(LANGUAGE_POLICIES)
-        return _note(f"Policy <b>{escape(policy)}</b> uses no language: it chooses its goals without a language "
-                     f"model. Pick a language policy ({escape(names)}) and press Reset to see its scores here.")
+        return _note(f"Policy <b>{html(policy)}</b> uses no language: it chooses its goals without a language "
+                     f"model. Pick a language policy ({html(names)}) and press Reset to see its scores here.")
     if view is None or view.fusion is None or not view.frontiers:
-        return _note(f"Policy <b>{escape(policy)}</b> scores frontiers with a language model: its scores appear "
+        return _note(f"Policy <b>{html(policy)}</b> scores frontiers with a language model: its scores appear "
                      "here when the agent first chooses a frontier (after the look-around).")
     cards = "".join(frontier_card_html(f, view.target) for f in shown_frontiers(view.frontiers, view.fusion, shown))
     return (f'<div style="font-size:12px;line-height:1.35">{fusion_html(view.fusion, view.frontiers, view.goal_kind)}'
@@ -57,13 +56,13 @@ def fusion_html(fusion: Fusion, frontiers: tuple[FrontierMarker, ...], goal_kind
     differs from the rule's pick where it does (commitment, or a goal that is not a frontier)."""
     pick = fusion.ids[fusion.choice]
     chosen = next((f.id for f in frontiers if f.chosen), None)
-    lines = [f"<b>Fusion rule</b> (<code>{escape(fusion.rule)}</code>, branch <i>{escape(fusion.branch)}</i>): "
-             f"{escape(fusion.describe())}"]
+    lines = [f"<b>Fusion rule</b> (<code>{html(fusion.rule)}</code>, branch <i>{html(fusion.branch)}</i>): "
+             f"{html(fusion.describe())}"]
     if chosen is not None and chosen != pick:
         lines.append(f"The rule picked F{pick}; the agent keeps F{chosen}, the frontier it already pursues "
                      f"(F{pick} is not better by the commitment margin).")
     elif chosen is None:
-        kind = escape(goal_kind or "none")
+        kind = html(goal_kind or "none")
         lines.append(f"The goal now is not a frontier ({kind}); these are the scores of the last frontier choice.")
     return "".join(f'<div style="margin-bottom:4px">{line}</div>' for line in lines)
 
@@ -73,7 +72,7 @@ def frontier_card_html(f: FrontierMarker, target: str) -> str:
     head = (f"<b>{'★ ' if f.chosen else ''}F{f.id}</b>{' (chosen)' if f.chosen else ''} &middot; "
             f"S_LLM {_num(f.s_llm)} &middot; S_CU {f.s_cu:.2f} &middot; fused {_num(f.fused)} &middot; "
             f"{f.distance_m:.1f} m away")
-    objects = escape(", ".join(f.objects)) or "none"
+    objects = html(", ".join(f.objects)) or "none"
     query = query_of(f, target)
     goals = sorted(f.llm_scores, key=lambda g: g != target)
     bars = "".join(bar_html(g, f.llm_scores[g], target=g == target, metres=f.expected_m.get(g)) for g in goals)
@@ -81,7 +80,7 @@ def frontier_card_html(f: FrontierMarker, target: str) -> str:
     return (f'<div style="border:{border};border-radius:4px;padding:4px 6px;margin:6px 0">'
             f"<div>{head}</div>"
             f'<div style="color:{_MUTED}">objects: {objects}</div>'
-            f'<div style="margin:2px 0"><i>{escape(query) if query else "no query: no informative object"}</i></div>'
+            f'<div style="margin:2px 0"><i>{html(query) if query else "no query: no informative object"}</i></div>'
             f"{bars or _note('no per-goal scores')}</div>")
 
 
@@ -89,13 +88,13 @@ def bar_html(goal: str, p: float, *, target: bool, metres: float | None = None) 
     """One goal's row: swatch-coloured bar of length ``p``, its value, and metres where a head gives them."""
     rgb = "rgb" + str(tuple(int(v) for v in category_color(goal)))
     width = max(0.0, min(1.0, float(p))) * BAR_PX
-    name = f"<b>{escape(goal)} (target)</b>" if target else escape(goal)
+    name = f"<b>{html(goal)} (target)</b>" if target else html(goal)
     ring = "outline:2px solid #000;outline-offset:1px;" if target else ""
     tail = "" if metres is None else f' <span style="color:{_MUTED}">{metres:.1f} m</span>'
     return (f'<div style="display:flex;align-items:center;gap:6px;margin:1px 0">'
             f'<span style="width:118px;flex:none;overflow:hidden;white-space:nowrap">{name}</span>'
             f'<span style="width:{BAR_PX}px;flex:none;background:#eee;height:10px;display:inline-block">'
-            f'<span data-goal="{escape(goal)}" style="display:block;height:10px;width:{width:.1f}px;background:{rgb};'
+            f'<span data-goal="{html(goal)}" style="display:block;height:10px;width:{width:.1f}px;background:{rgb};'
             f'{ring}"></span></span>'
             f"<span>{p:.2f}{tail}</span></div>")
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import viser
 
+from app.page_text import code
 from l3mvn.errors import L3MVNError
 from l3mvn.recording import list_recordings
 from l3mvn.recording.replay import WebViewer, start_web_viewer
@@ -67,10 +68,10 @@ class RecordingsPanel:
         self.pick.value = keep
         self.pick.disabled = not found
         if not found:
-            self.listing.content = f"_no recordings in `{self.record_dir}/` yet: tick Record (.rrd), then Reset_"
+            self.listing.content = f"_no recordings in {code(f'{self.record_dir}/')} yet: tick Record (.rrd), then Reset_"
             return
-        lines = [f"{len(found)} in `{self.record_dir}/`, newest first:", ""]
-        lines += [f"- `{info.path.name}` ({info.size_bytes / 1e6:.1f} MB)" for info in found[:LISTED]]
+        lines = [f"{len(found)} in {code(f'{self.record_dir}/')}, newest first:", ""]
+        lines += [f"- {code(info.path.name)} ({info.size_bytes / 1e6:.1f} MB)" for info in found[:LISTED]]
         self.listing.content = "\n".join(lines)
 
     def open(self, name: str, client_id: int | None = None) -> WebViewer:
@@ -83,7 +84,7 @@ class RecordingsPanel:
             if self._viewer is not None:
                 self._viewer.stop()
             self._viewer = viewer = start_web_viewer(offered[name], self.host)
-        self.link.content = (f"**[Open `{name}` in rerun]({viewer.url})** (rerun's web viewer, a new tab; "
+        self.link.content = (f"**[Open {code(name)} in rerun]({viewer.url})** (rerun's web viewer, a new tab; "
                              "opening another recording stops this one)")
         self._tell(client_id, f"rerun serves {name}: follow the link in the Recordings folder")
         log.info("rerun web viewer for %s at %s", name, viewer.url)

@@ -20,7 +20,7 @@ from l3mvn.config import Config
 from l3mvn.errors import L3MVNError, first_line
 from l3mvn.eval.job import EvalJob
 from l3mvn.eval.results import row_problem
-from l3mvn.recording.catalogue import find_recording
+from l3mvn.recording.catalogue import find_recording, recording_path, unique_tag
 from l3mvn.recording.video import VideoOptions, frames, read_episode
 
 ALL, FAILURES, SUCCESSES = "all", "failures", "successes"
@@ -191,6 +191,7 @@ class Rerun:
     row: dict
     same_config: bool  # the config hash (config, policy, seed) equals the stored one
     reproduced: bool  # success, SPL, DTG, steps and failure cause all equal the stored ones
+    recording: Path  # the new recording (a file of its own: no other recording is touched)
 
     @property
     def summary(self) -> str:
@@ -202,9 +203,10 @@ class Rerun:
 
 
 def rerun(row: dict, *, dataset: str | None, split: str, houses: int, episodes_per_house: int, seed: int,
-          record_dir: str | Path | None = None) -> Rerun:
+          record_dir: str | Path) -> Rerun:
     """Run the line's episode again, exactly as ``l3mvn eval`` did (same job path, its stored config and
-    policy, this dashboard's episode set and seed), optionally recording it."""
+    policy, this dashboard's episode set and seed), recorded under a name of its own in ``record_dir``
+    (``unique_tag``), so a re-run never replaces a recording and concurrent re-runs never share a file."""
     cfg = config_of(row)
     job = EvalJob.create(dataset, split, houses=houses, episodes_per_house=episodes_per_house, seed=seed,
                          config=cfg, policy=str(row.get("policy")), record_dir=record_dir)
@@ -212,9 +214,14 @@ def rerun(row: dict, *, dataset: str | None, split: str, houses: int, episodes_p
     if key not in set(job.keys()):
         raise L3MVNError(f"episode {key} is not in this dashboard's episode set; start serve with the eval's "
                          "--dataset/--houses/--episodes-per-house/--seed")
-    new = job.run_one(key)
+    tag = unique_tag("rerun")
+    new = job.run_one(key, record_tag=tag)
     if "error" in new:
         raise L3MVNError(f"re-running {key} failed: {first_line(str(new['error']))}")
     fields = ("success", "spl", "dtg", "steps", "failure")
-    return Rerun(new, job.config_hash == row.get("config_hash"), all(new.get(f) == row.get(f) for f in fields))
+    recording = recording_path(record_dir, job.load().name, new["scene"], new["episode_id"], job.policy, tag)
+    if not recording.is_file():
+        raise L3MVNError(f"re-running {key} wrote no recording at {recording}")
+    return Rerun(new, job.config_hash == row.get("config_hash"), all(new.get(f) == row.get(f) for f in fields),
+                 recording)
 

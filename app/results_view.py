@@ -13,7 +13,6 @@ import logging
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from html import escape
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +20,7 @@ import viser
 
 from app.compare_view import ComparePanel, main_view_html
 from app.map_image import png_rgb
+from app.page_text import code, html, md
 from app.results import (
     ALL,
     SORT_KEYS,
@@ -49,10 +49,11 @@ RERUN_NOTE = ("Re-run runs the episode again with the config stored in its line,
 
 @dataclass(frozen=True)
 class ResultsSource:
-    """Where the panel reads from, and the episode set a re-run uses (the serve flags)."""
+    """Where the panel reads from, where re-runs write, and the episode set a re-run uses (the serve flags)."""
 
     results_dir: Path
-    recordings_dir: Path
+    recordings_dir: Path  # the eval's own recordings: read, never written
+    rerun_dir: Path  # where Re-run live records (each re-run a file of its own)
     dataset: str | None
     split: str
     houses: int
@@ -73,7 +74,8 @@ class ResultsPanel:
         self._decisions: list[str] = []
         self._lock = threading.Lock()
         with gui.add_folder("Results", expand_by_default=True):
-            gui.add_markdown(f"Eval result files in `{source.results_dir}`; recordings from `{source.recordings_dir}`.")
+            gui.add_markdown(f"Eval result files in {code(source.results_dir)}; recordings from "
+                             f"{code(source.recordings_dir)}; re-runs recorded in {code(source.rerun_dir)}.")
             self.file = gui.add_dropdown("Result file", self._file_names())
             self.refresh = gui.add_button("Refresh files")
             self.notes = gui.add_markdown("")
@@ -165,11 +167,11 @@ class ResultsPanel:
         try:
             loaded = load_result_file(self.source.results_dir / name)
         except L3MVNError as exc:
-            self.notes.content = f"**{name}**: {exc}"
+            self.notes.content = f"**{md(name)}**: {md(exc)}"
             raise
         self._file = loaded
         left = f"; {len(loaded.problems)} lines left out: " + "; ".join(loaded.problems[:3]) if loaded.problems else ""
-        self.notes.content = f"**{name}**: {len(loaded.rows)} episodes{left}"
+        self.notes.content = f"**{md(name)}**: {md(f'{len(loaded.rows)} episodes{left}')}"
         self.filter.options = filter_choices(loaded.rows)
         self.filter.value = ALL
         self._show_table()
@@ -188,12 +190,14 @@ class ResultsPanel:
             raise L3MVNError("pick an episode first (the filter may have none)")
         return row
 
-    def _open(self, row: EpisodeRow, client_id: int | None) -> None:
-        path = recording_of(self.source.recordings_dir, row)
+    def _open(self, row: EpisodeRow, client_id: int | None, path: Path | None = None) -> None:
+        """Show ``path``, else the eval's recording of ``row``, else its newest re-run."""
+        s = self.source
+        path = path or recording_of(s.recordings_dir, row) or recording_of(s.rerun_dir, row)
         if path is None:
             self._clear_steps(f"no recording of {row.scene} episode {row.episode_id} ({row.policy}) in "
-                              f"{self.source.recordings_dir}: press Re-run live to run and record it")
-            raise L3MVNError(f"no recording of this episode in {self.source.recordings_dir}; press Re-run live")
+                              f"{s.recordings_dir} or {s.rerun_dir}: press Re-run live to run and record it")
+            raise L3MVNError(f"no recording of this episode in {s.recordings_dir} or {s.rerun_dir}; press Re-run live")
         pictures, decisions = recording_frames(path)
         if not pictures:
             raise L3MVNError(f"{path.name} holds no steps")
@@ -209,11 +213,11 @@ class ResultsPanel:
         s = self.source
         self._tell(client_id, f"re-running {row.raw.get('key')} ({row.policy}); this takes a few seconds")
         done = rerun(row.raw, dataset=s.dataset, split=s.split, houses=s.houses,
-                     episodes_per_house=s.episodes_per_house, seed=s.seed, record_dir=s.recordings_dir)
-        self.decision.content = done.summary
+                     episodes_per_house=s.episodes_per_house, seed=s.seed, record_dir=s.rerun_dir)
+        self.decision.content = md(done.summary)
         self._tell(client_id, done.summary, "info" if done.reproduced else "warning")
-        self._open(row, client_id)
-        self.decision.content = done.summary
+        self._open(row, client_id, done.recording)
+        self.decision.content = md(done.summary)
 
     def _show_step(self, k: int) -> None:
         with self._lock:
@@ -223,7 +227,7 @@ class ResultsPanel:
             png, line = self._frames[k], self._decisions[k]
         picture = png_rgb(png)
         self.picture.image = picture
-        self.decision.content = line
+        self.decision.content = md(line)
         self.large.content = (main_view_html(picture, f"Recorded step: {line}", main_view=True)
                               if self.main_view.value else "")
 
@@ -233,7 +237,7 @@ class ResultsPanel:
         self.step.disabled = True
         self.picture.image = np.zeros((8, 8, 3), np.uint8)
         self.large.content = ""
-        self.decision.content = note
+        self.decision.content = md(note)
 
     def _compare(self, name: str) -> None:
         if name == NONE or self._file is None:
@@ -243,10 +247,10 @@ class ResultsPanel:
         other = self._other = load_result_file(self.source.results_dir / name)
         only_a, only_b = solved_by_one(self._file.rows, other.rows)
         here = self._file.path.name
-        self.comparison.content = (f"Solved by **{here}** only ({len(only_a)}): "
-                                   + (", ".join(r.raw["key"] for r in only_a) or "none")
-                                   + f"\n\nSolved by **{name}** only ({len(only_b)}): "
-                                   + (", ".join(r.raw["key"] for r in only_b) or "none"))
+        self.comparison.content = (f"Solved by **{md(here)}** only ({len(only_a)}): "
+                                   + md(", ".join(str(r.raw["key"]) for r in only_a) or "none")
+                                   + f"\n\nSolved by **{md(name)}** only ({len(only_b)}): "
+                                   + md(", ".join(str(r.raw["key"]) for r in only_b) or "none"))
 
 
 def _number(v: float | None, digits: int = 2) -> str:
@@ -259,10 +263,10 @@ _COLUMNS = ("#", "scene", "ep", "goal", "ok", "SPL", "DTG", "steps", "cause", "c
 
 def _html_table(head: tuple[str, ...], rows: list[tuple], caption: str = "") -> str:
     table, cell = _TABLE_STYLE
-    th = "".join(f"<th style='{cell}'>{escape(h)}</th>" for h in head)
-    body = "".join("<tr>" + "".join(f"<td style='{cell}'>{v if isinstance(v, _Raw) else escape(str(v))}</td>"
+    th = "".join(f"<th style='{cell}'>{html(h)}</th>" for h in head)
+    body = "".join("<tr>" + "".join(f"<td style='{cell}'>{v if isinstance(v, _Raw) else html(str(v))}</td>"
                                     for v in row) + "</tr>" for row in rows)
-    cap = f"<div style='font-size:12px;font-weight:600;margin-top:6px'>{escape(caption)}</div>" if caption else ""
+    cap = f"<div style='font-size:12px;font-weight:600;margin-top:6px'>{html(caption)}</div>" if caption else ""
     return f"{cap}<div style='overflow-x:auto'><table style='{table}'><tr>{th}</tr>{body}</table></div>"
 
 

@@ -29,6 +29,7 @@ from l3mvn.config.policy import DEFAULT_HEAD, HEAD_KINDS, HEAD_SCORER
 from l3mvn.datasets import EpisodeSet
 from l3mvn.errors import L3MVNError
 from l3mvn.events import EventBus, StepEvent
+from l3mvn.recording.catalogue import DEFAULT_RECORD_DIR, unique_tag
 from l3mvn.agent.teleop import TeleopAgent
 from l3mvn.registry import (
     ALIASES, DIRECT_POLICIES, LANGUAGE_POLICIES, POLICY_NAMES, TELEOP, check_policy,
@@ -59,7 +60,7 @@ class DashboardController:
         self.policy_name = check_policy(policy)
         self.scorer: str | None = None
         self.record = False
-        self.record_dir = Path(record_dir or "recordings")
+        self.record_dir = Path(record_dir or DEFAULT_RECORD_DIR)
         self.bus = EventBus()
         self.bus.subscribe(self._on_event)
         self._by_scene: dict[str, list[Episode]] = {}
@@ -476,9 +477,12 @@ class DashboardController:
             self._notify(str(exc), level="warning", sticky=True, title="Scorer not applied")
 
     def _start_recorder(self, episode: Episode) -> None:
+        """A recording of this run of ``episode`` under a name of its own: the session may run an
+        episode many times, and the folder may hold an eval's recording of it (never replaced)."""
         from l3mvn.recording import Recorder
 
-        recorder = Recorder.for_episode(self.record_dir, self.episodes.name, episode, self.policy_name).attach(self.bus)
+        recorder = Recorder.for_episode(self.record_dir, self.episodes.name, episode, self.policy_name,
+                                        unique_tag("live")).attach(self.bus)
         self._recorder_off = recorder.close
 
     def _stop_recorder(self) -> None:

@@ -28,6 +28,7 @@ from app.client_input import ray_refusal, update_refusal
 from app.compare_view import ComparePanel, EpisodeSource
 from app.language_panel import language_html
 from app.history_view import HistoryPanel
+from app.page_text import code, html, md
 from app.map_image import GT_FLOOR, GT_GOAL, GT_REGION, ground_truth_layer, score_color
 from app.recordings_view import RecordingsPanel
 from app.results_view import ResultsPanel, ResultsSource
@@ -742,38 +743,38 @@ def _status_markdown(snap: Snapshot) -> str:
     ev = snap.event
     lines = []
     if snap.busy:
-        lines.append(f"**Working**: {snap.busy}")
+        lines.append(f"**Working**: {md(snap.busy)}")
     if snap.run_queued:
         lines.append("**Run queued**: it starts when the reset finishes")
     if snap.error:
-        lines.append(f"**Error:** {snap.error}")
+        lines.append(f"**Error:** {md(snap.error)}")
     if ev is None:
-        lines.append(snap.note or "No episode yet.")
+        lines.append(md(snap.note or "No episode yet."))
         return "\n\n".join(lines)
     state = "running" if snap.running else ("finished" if ev.done else "paused")
-    lines.append(f"**{ev.episode_key}** ({snap.policy}), target **{ev.goal}**, {state}")
+    lines.append(f"**{md(ev.episode_key)}** ({md(snap.policy)}), target **{md(ev.goal)}**, {state}")
     action = ev.action.name.lower() if ev.action is not None else "(reset)"
-    lines.append(f"Step **{ev.step}**, action `{action}`, segment {ev.segment}")
+    lines.append(f"Step **{ev.step}**, action {code(action)}, segment {md(ev.segment)}")
     dist = ev.ground_truth.get("distance_to_goal_m")
     if dist is not None:
         lines.append(f"Distance to goal: {dist:.2f} m _(ground truth, not known to the agent)_")
     if snap.segment_note:
-        lines.append(f"**New segment**: {snap.segment_note}")
+        lines.append(f"**New segment**: {md(snap.segment_note)}")
     d = ev.decision
     if d is not None and d.goal_kind == "manual" and snap.manual_goal is None:
         lines.append("Goal: manual goal cleared; the policy picks its own on the next step")
     elif d is not None and (d.reason or d.goal_kind):
-        lines.append(f"Goal: {d.goal_kind or '-'}; {d.reason}".rstrip("; "))
+        lines.append(md(f"Goal: {d.goal_kind or '-'}; {d.reason}".rstrip("; ")))
     if snap.manual_goal is not None:
-        lines.append(f"**Manual goal**: {_manual_goal_words(snap)}")
+        lines.append(f"**Manual goal**: {md(_manual_goal_words(snap))}")
     if ev.done and ev.result:
         r = ev.result
-        verdict = "**SUCCESS**" if r.get("success") else f"**FAILURE** ({r.get('failure')})"
-        lines.append(f"{verdict}: SPL {r.get('spl', 0):.2f}, {r.get('steps')} steps")
+        verdict = "**SUCCESS**" if r.get("success") else f"**FAILURE** ({md(r.get('failure'))})"
+        lines.append(f"{verdict}: SPL {r.get('spl', 0):.2f}, {md(r.get('steps'))} steps")
     if snap.policy in POLICY_NOTES:
         lines.append(f"_{POLICY_NOTES[snap.policy]}_")
     if snap.note and snap.note not in ("running", "paused"):
-        lines.append(f"_{snap.note}_")
+        lines.append(f"_{md(snap.note)}_")
     return "\n\n".join(lines)
 
 
@@ -794,9 +795,9 @@ def _manual_goal_words(snap: Snapshot) -> str:
 def _no_map_markdown(policy: str, *, started: bool) -> str:
     """The Frontiers panel without a map: why, for the policy that is chosen."""
     if policy in DIRECT_POLICIES:
-        return f"_no frontiers: policy {policy!r} keeps no map (the map view shows the ground-truth plan)_"
+        return f"_no frontiers: policy {md(repr(policy))} keeps no map (the map view shows the ground-truth plan)_"
     return ("_frontiers appear after the agent's first steps_" if started
-            else f"_policy {policy!r} builds a map: frontiers appear after Reset and the first steps_")
+            else f"_policy {md(repr(policy))} builds a map: frontiers appear after Reset and the first steps_")
 
 
 def _frontier_markdown(view: MapView) -> str:
@@ -808,8 +809,8 @@ def _frontier_markdown(view: MapView) -> str:
         llm = "-" if f.s_llm is None else f"{f.s_llm:.2f}"
         fused = "-" if f.fused is None else f"{f.fused:.2f}"
         rows.append(f"| {'★' if f.chosen else ''}F{f.id} | {llm} | {f.s_cu:.2f} | {fused} | "
-                    f"{', '.join(f.objects) or '-'} |")
-    queries = [f"- F{f.id} `{q}`" for f in view.frontiers for q in list(f.queries.values())[:1]]
+                    f"{md(', '.join(f.objects) or '-')} |")
+    queries = [f"- F{f.id} {code(q)}" for f in view.frontiers for q in list(f.queries.values())[:1]]
     note = f"\n\n_Map labels show the best {TOP_LABELS} and the chosen (★) frontier; all are listed here._"
     return "\n".join(rows) + note + ("\n\n**Queries**\n" + "\n".join(queries) if queries else "")
 
@@ -817,7 +818,7 @@ def _frontier_markdown(view: MapView) -> str:
 def _unavailable_markdown(problems: dict[str, str]) -> str:
     if not problems:
         return "_every scorer's weights are on disk_"
-    lines = "\n".join(f"- `{name}`: {why}" for name, why in problems.items())
+    lines = "\n".join(f"- {code(name)}: {md(why)}" for name, why in problems.items())
     return f"**Unavailable scorers** (refused if picked):\n{lines}"
 
 
@@ -839,7 +840,7 @@ def _legend_html(categories, *, target: str = "", ground_truth: bool = False) ->
     cats = sorted(categories, key=lambda c: c[0] != target)
     parts = [item.format(_swatch(rgb) + name) for name, rgb in fixed]
     parts += [item.format(_swatch(rgb, ring=name == target)
-                          + (f"<b>{name} (target)</b>" if name == target else name)) for name, rgb in cats]
+                          + (f"<b>{html(name)} (target)</b>" if name == target else html(name))) for name, rgb in cats]
     if ground_truth:
         parts += [item.format(_swatch(rgba[:3]) + f"<b>ground truth</b>: {name}") for name, rgba in
                   (("floor plan", GT_FLOOR), ("success region", GT_REGION), ("goal instances", GT_GOAL))]

@@ -334,8 +334,10 @@ def _progress_floors(total: int):
 
 def _cmd_generate(args: argparse.Namespace) -> int:
     from l3mvn.episodes import episode_file, generate_episodes, write_episode_file
+    from l3mvn.paths import plain_name
     from l3mvn.scenes.semexp import info_path, save_split, to_semexp_channels
 
+    plain_name(args.split, "--split", "val")  # a folder under --out: it must not climb out of it
     _, scenes = _scenes(args)
     out = Path(args.out)
     split_out = out / args.split

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 
 import pytest
 
 from conftest import serve_dashboard
+from app.page_text import md
 from app.state import Notice
 from app.views import cell_to_xy, ray_to_cell
 from l3mvn.config import Config, SimConfig
@@ -199,11 +201,11 @@ def test_a_recorded_episode_is_written_and_listed_on_the_page(dash, ctl, tmp_pat
     _run_nearest_episode_to_the_end(ctl)
     ctl.set_record(False)
     files = list(tmp_path.glob("*.rrd"))
-    assert len(files) == 1 and files[0].name.endswith("_oracle.rrd")
+    assert len(files) == 1 and re.fullmatch(r".*_oracle_live-[0-9TZ]+-\d+-[0-9a-f]{6}\.rrd", files[0].name)
     deadline = time.monotonic() + 5
-    while files[0].name not in dash.view.recordings.listing.content and time.monotonic() < deadline:
+    while md(files[0].name) not in dash.view.recordings.listing.content and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert files[0].name in dash.view.recordings.listing.content
+    assert md(files[0].name) in dash.view.recordings.listing.content
     assert dash.view.recordings.pick.value == files[0].name  # offered to "Open in rerun"
 
 

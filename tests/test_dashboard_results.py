@@ -5,14 +5,17 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
 
 from conftest import free_port
 from app.map_image import png_rgb
+from app.page_text import md
 from app.results import (
     FAILURES,
     filter_choices,
@@ -26,6 +29,7 @@ from app.results import (
     summaries,
 )
 from l3mvn.errors import L3MVNError
+from l3mvn.recording import read_recording
 
 HOUSES, PER_HOUSE, SEED = 1, 3, 0
 EVAL = ["--houses", str(HOUSES), "--episodes-per-house", str(PER_HOUSE), "--seed", str(SEED),
@@ -99,21 +103,69 @@ def test_a_recording_reads_back_one_picture_per_step(evaluated):
 
 
 def test_rerun_with_the_stored_config_and_seed_gives_the_stored_result(evaluated, tmp_path):
+    made = []
     for row in load_result_file(evaluated / "frontier.jsonl").rows:
-        done = rerun(row.raw, dataset=None, split="val", houses=HOUSES, episodes_per_house=PER_HOUSE, seed=SEED)
+        done = rerun(row.raw, dataset=None, split="val", houses=HOUSES, episodes_per_house=PER_HOUSE, seed=SEED,
+                     record_dir=tmp_path)
         assert done.same_config and done.reproduced, done.summary
         for field in ("success", "spl", "dtg", "steps", "failure", "path_length_m"):
             assert done.row[field] == row.raw[field], field
+        assert done.recording.parent == tmp_path and read_recording(done.recording).steps[-1] == row.steps
+        made.append(done.recording)
     edited = {**row.raw, "config": {**row.raw["config"], "sim": {**row.raw["config"]["sim"], "max_steps": 5}}}
-    other = rerun(edited, dataset=None, split="val", houses=HOUSES, episodes_per_house=PER_HOUSE, seed=SEED)
+    other = rerun(edited, dataset=None, split="val", houses=HOUSES, episodes_per_house=PER_HOUSE, seed=SEED,
+                  record_dir=tmp_path)
+    made.append(other.recording)
+    assert sorted(tmp_path.glob("*.rrd")) == sorted(made) and len(set(made)) == len(made)  # one new file each
     assert not other.same_config and not other.reproduced and other.row["steps"] <= 5
     assert "DIFFERENT result from stored" in other.summary and "config hash differs" in other.summary
     with pytest.raises(L3MVNError, match="is not in this dashboard's episode set"):
         rerun({**row.raw, "key": "procedural-0099/0/0"}, dataset=None, split="val", houses=HOUSES,
-              episodes_per_house=PER_HOUSE, seed=SEED)
+              episodes_per_house=PER_HOUSE, seed=SEED, record_dir=tmp_path)
     with pytest.raises(L3MVNError, match="stores no config"):
         rerun({k: v for k, v in row.raw.items() if k != "config"}, dataset=None, split="val", houses=HOUSES,
-              episodes_per_house=PER_HOUSE, seed=SEED)
+              episodes_per_house=PER_HOUSE, seed=SEED, record_dir=tmp_path)
+
+
+def test_three_tabs_rerunning_one_episode_leave_every_recording_readable(evaluated, tmp_path):
+    """Re-runs record beside the eval's recordings (reruns/), each in a file of its own; the eval's
+    recordings stay byte for byte as they were, even with three re-runs of one line at once."""
+    from app.server import start_dashboard
+
+    shutil.copytree(evaluated / "rec", tmp_path / "rec")
+    before = {p.name: p.read_bytes() for p in (tmp_path / "rec").iterdir()}
+    dash = start_dashboard(port=free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, results_dir=evaluated,
+                           recordings_dir=tmp_path / "rec")
+    try:
+        panel = dash.view.results
+        panel._load("frontier.jsonl")
+        row = panel._shown[0]
+        assert recording_of(tmp_path / "rec", row) is not None  # the eval recorded this very episode
+        failures: list[BaseException] = []
+
+        def press() -> None:
+            try:
+                panel._rerun(row, None)
+            except BaseException as exc:  # noqa: BLE001 - reported below
+                failures.append(exc)
+
+        tabs = [threading.Thread(target=press) for _ in range(3)]
+        for t in tabs:
+            t.start()
+        for t in tabs:
+            t.join(timeout=300)
+        assert not failures, failures
+    finally:
+        dash.stop()
+    assert {p.name: p.read_bytes() for p in (tmp_path / "rec").iterdir()} == before
+    reruns = sorted((tmp_path / "reruns").glob("*.rrd"))
+    assert len(reruns) == 3
+    for path in reruns:
+        assert read_recording(path).steps[-1] == row.steps
+    with pytest.raises(L3MVNError, match=r"re-runs would be recorded among the eval's own recordings in .*rec: give "
+                                         r"--record-dir another folder"):
+        start_dashboard(port=free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, results_dir=evaluated,
+                        recordings_dir=tmp_path / "rec", record_dir=tmp_path / "rec")
 
 
 def test_the_panel_starts_on_a_folder_whose_first_file_is_not_results(evaluated, tmp_path):
@@ -125,7 +177,7 @@ def test_the_panel_starts_on_a_folder_whose_first_file_is_not_results(evaluated,
                            recordings_dir=evaluated / "rec")
     try:
         panel = dash.view.results
-        assert panel._file is None and "a_notes.jsonl is not an eval result file" in panel.notes.content
+        assert panel._file is None and md("a_notes.jsonl is not an eval result file") in panel.notes.content
         panel._load("b.jsonl")
         panel.episode.value = panel._shown[0].label
         panel._open(panel._selected(), None)

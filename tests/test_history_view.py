@@ -49,7 +49,7 @@ def test_look_back_at_a_step_of_the_live_episode_and_return(dash):
     _wait("14 steps kept", lambda: panel.steps == list(range(1, 15)))  # the reset has no map yet
     assert panel.step.value == 14 and panel.picture.content == ""  # following the live episode
     panel.show(5)
-    assert "l3mvn-main-view" in panel.picture.content and re.match(r"step 5: [a-z_]+ \[", panel.line.content)
+    assert "l3mvn-main-view" in panel.picture.content and re.match(r"step 5: [a-z\\_]+ \\\[", panel.line.content)
     assert np.array_equal(_shown(panel), panel.picture_at(5)) and not panel.live.disabled
     assert not np.array_equal(panel.picture_at(5), panel.picture_at(14))
     panel.show(14)  # the newest step is the live map

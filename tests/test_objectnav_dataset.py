@@ -229,3 +229,27 @@ def test_cli_error_is_one_line(exported, capsys):
     code = main(["eval", "--dataset", str(exported / "objectnav_hm3d_v2"), "--split", "val", "--policy", "oracle"])
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("error: ") and err.count("\n") == 1 and "--scenes DIR" in err
+
+
+def test_a_scene_id_never_leaves_the_scan_root(exported, tmp_path):
+    """A scan outside --scenes is not loaded, whether the scene_id climbs to it or names it outright."""
+    root = tmp_path / "root"
+    (root / "scene_datasets").mkdir(parents=True)
+    outside = tmp_path / "outside"
+    shutil.copytree(exported / "scene_datasets", outside)
+    stage = next(outside.rglob("procedural-0000.glb"))
+    for scene_id, match in ((f"../../outside/{stage.relative_to(outside)}", r"scene_id '\.\./\.\./outside/.*' would "
+                             r"leave --scenes .*root/scene_datasets: it must name a file inside it"),
+                            (str(stage), r"scan /.*procedural-0000.glb is not under --scenes .*root/scene_datasets")):
+        content = _content(exported)
+        for episode in content["episodes"]:
+            episode["scene_id"] = scene_id
+        _refused(match, _dataset(tmp_path / str(len(scene_id)), exported, content), root / "scene_datasets")
+
+
+def test_export_refuses_a_split_that_leaves_out(tmp_path):
+    out = tmp_path / "out"
+    for split in ("../../escape", "a/b", "..", ""):
+        with pytest.raises(L3MVNError, match=r"^--split must be a plain name such as 'val'"):
+            export_hm3d(out, 1, split=split)
+    assert not out.exists() and not (tmp_path / "escape").exists()

@@ -20,6 +20,7 @@ from l3mvn.recording import (
     Recorder, add_replay_arguments, list_recordings, open_recording, parse_recording_name, read_recording,
     recording_path, run_replay,
 )
+from l3mvn.recording.catalogue import unique_tag
 from l3mvn.recording.layout import LABELLED_FRONTIERS
 from l3mvn.runner import Runner
 from l3mvn.types import Action
@@ -200,10 +201,28 @@ def test_a_failing_event_is_counted_not_raised_and_the_file_still_closes(runner,
 def test_recording_path_follows_the_pattern_and_parses_back(tmp_path):
     path = recording_path(tmp_path / "recordings", "/data/gibson_semexp", "Collierville", 7, "cost-utility")
     assert path == tmp_path / "recordings" / "gibson-semexp_Collierville_7_cost-utility.rrd"
-    assert parse_recording_name(path) == ("gibson-semexp", "Collierville", 7, "cost-utility")
+    assert parse_recording_name(path) == ("gibson-semexp", "Collierville", 7, "cost-utility", None)
     assert parse_recording_name(tmp_path / "holiday.rrd") is None
     with pytest.raises(L3MVNError, match="cannot name a recording"):
         recording_path(tmp_path, "ds", "___", 1, "oracle")
+    tag = unique_tag("rerun")
+    assert re.fullmatch(r"rerun-\d{8}T\d{6}Z-\d+-[0-9a-f]{6}", tag) and tag != unique_tag("rerun")
+    tagged = recording_path(tmp_path, "ds", "Collierville", 7, "oracle", tag)
+    assert tagged.name == f"ds_Collierville_7_oracle_{tag}.rrd"
+    assert parse_recording_name(tagged) == ("ds", "Collierville", 7, "oracle", tag)
+
+
+def test_one_path_has_one_writer_at_a_time(tmp_path):
+    """A second recorder of a path that is being written is refused before it touches the file."""
+    path = tmp_path / "ep.rrd"
+    first = Recorder(path, dataset="ds", scene="s", episode_id=0, policy="oracle")
+    size = path.stat().st_size
+    with pytest.raises(L3MVNError, match=r"recording .*ep.rrd is being written by another recorder"):
+        Recorder(path, dataset="ds", scene="s", episode_id=0, policy="oracle")
+    assert path.stat().st_size >= size
+    first.close()
+    assert read_recording(path).application_id == "l3mvn"
+    Recorder(path, dataset="ds", scene="s", episode_id=0, policy="oracle").close()  # free again once closed
 
 
 def test_list_recordings_parses_names_newest_first_and_keeps_foreign_files(tmp_path):

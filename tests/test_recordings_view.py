@@ -11,6 +11,7 @@ import urllib.request
 import pytest
 from conftest import serve_dashboard
 
+from app.page_text import code
 from l3mvn.errors import L3MVNError
 
 
@@ -44,7 +45,7 @@ def test_open_in_rerun_serves_the_recording_and_links_it(dash):
     assert len(names) == 2 and all(n.endswith(".rrd") for n in names) and not panel.pick.disabled
     first = panel.open(names[0])
     assert first.alive and _answers(first.url) == 200
-    assert first.url in panel.link.content and names[0] in panel.link.content
+    assert first.url in panel.link.content and code(names[0]) in panel.link.content
     second = panel.open(names[1])  # one viewer at a time: the first one stops
     assert not first.alive and second.alive and _answers(second.url) == 200
     dash.view.recordings.close()

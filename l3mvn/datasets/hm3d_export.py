@@ -32,6 +32,7 @@ from scipy import ndimage as ndi
 from l3mvn.config import Config, TaskConfig
 from l3mvn.episodes import generate_episodes
 from l3mvn.errors import L3MVNError
+from l3mvn.paths import plain_name
 from l3mvn.scenes.procedural import procedural_split
 from l3mvn.scenes.scan import SemanticObject, write_semantic_txt
 from l3mvn.grid import disk
@@ -65,6 +66,7 @@ def export_hm3d(out: str | Path, houses: int, *, seed: int = 0, split: str = "va
     for name, value in (("--houses", houses), ("--floors", floors), ("--episodes-per-floor", episodes_per_floor)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise L3MVNError(f"{name} must be a whole number >= 1, got {value!r}")
+    plain_name(split, "--split", "val")
     cfg = cfg or Config()
     out = Path(out)
     scene_root, episode_root = out / SCENE_DIR, out / EPISODE_DIR / split

@@ -25,6 +25,7 @@ from l3mvn.config import Config
 from l3mvn.datasets import EpisodeSet
 from l3mvn.episodes import _finite_numbers, _geodesic, _show, _whole_number, read_json_gz, yaw_quaternion
 from l3mvn.errors import L3MVNError
+from l3mvn.paths import relative_parts
 from l3mvn.scenes.categories import goal_category
 from l3mvn.scenes.scan import ScanFiles, ScanFloor, floor_at, load_scan, scene_up_axis
 from l3mvn.task.regions import goal_region
@@ -180,8 +181,9 @@ def _goals_of(scene_id: str, goals: dict[str, list[tuple[Path, str, object]]]):
 
 
 def _scan_files(scene_id: str, root: Path) -> ScanFiles:
-    """The scan a ``scene_id`` names, looked up by its tails under ``root`` (see the module docstring)."""
-    parts = Path(scene_id).parts
+    """The scan a ``scene_id`` names, looked up by its tails under ``root`` (see the module docstring);
+    every candidate lies inside ``root``."""
+    parts = relative_parts(scene_id, "scene_id", f"--scenes {root}")
     names = [parts[-1]]
     if parts[-1].endswith(".basis.glb"):  # the plain GLB's textures are JPEGs we can read; Basis ones we cannot
         names.insert(0, parts[-1][: -len(".basis.glb")] + ".glb")

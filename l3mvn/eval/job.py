@@ -13,6 +13,7 @@ import os
 import resource
 import socket
 import sys
+import threading
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -64,11 +65,16 @@ class EvalJob:
     def keys(self) -> list[str]:
         return [ep.key for ep in self.load().episodes]
 
-    def run_one(self, key: str) -> dict:
-        """Run one episode and return its result line; any exception becomes an error row."""
+    def run_one(self, key: str, record_tag: str | None = None) -> dict:
+        """Run one episode and return its result line; any exception becomes an error row.
+        ``record_tag`` names the recording apart from the episode's others (``recording_path``).
+
+        A process keeps one job's warm state, so episodes of this process run one at a time
+        whichever thread asks (a dashboard's tabs re-running lines, a comparison)."""
         t0 = time.perf_counter()
         try:
-            return _state(self).run(key)
+            with _STATE_LOCK:
+                return _state(self).run(key, record_tag)
         except Exception as exc:  # a broken episode must not take the run down: report it as a row
             return error_row(self, key, f"{type(exc).__name__}: {exc}", seconds=time.perf_counter() - t0,
                              detail=traceback.format_exc(limit=8))
@@ -122,7 +128,7 @@ class _JobState:
         self.by_key = {ep.key: ep for ep in self.episodes.episodes}
         self.runner = Runner(job.config, seed=job.seed, config_hash=job.config_hash)
 
-    def run(self, key: str) -> dict:
+    def run(self, key: str, record_tag: str | None = None) -> dict:
         episode = self.by_key.get(key)
         if episode is None:
             raise L3MVNError(f"episode {key!r} is not in {self.episodes.name}/{self.episodes.split}")
@@ -130,7 +136,8 @@ class _JobState:
         stages, bus = _StageTotals(), EventBus()
         bus.subscribe(stages)
         if self.job.record_dir is not None:
-            Recorder.for_episode(self.job.record_dir, self.episodes.name, episode, self.job.policy).attach(bus)
+            Recorder.for_episode(self.job.record_dir, self.episodes.name, episode, self.job.policy,
+                                 record_tag).attach(bus)
         session = self.runner.session(self.episodes.scene_of(episode), self.job.policy, bus)
         setup_s = time.perf_counter() - t0
         session.start(episode)
@@ -151,13 +158,15 @@ class _JobState:
 
 
 _STATES: dict[EvalJob, _JobState] = {}
+_STATE_LOCK = threading.RLock()
 
 
 def _state(job: EvalJob) -> _JobState:
-    if job not in _STATES:
-        _close_states()  # one job at a time per process: drop the previous job's worlds
-        _STATES[job] = _JobState(job)
-    return _STATES[job]
+    with _STATE_LOCK:  # never while another thread runs an episode of the state it would drop
+        if job not in _STATES:
+            _close_states()  # one job at a time per process: drop the previous job's worlds
+            _STATES[job] = _JobState(job)
+        return _STATES[job]
 
 
 @atexit.register

@@ -3,9 +3,13 @@ reading one back (which steps it holds, whether it is readable at all, what surv
 
 from __future__ import annotations
 
+import os
 import re
+import secrets
+import stat
 import struct
 import tempfile
+import time
 import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -15,6 +19,7 @@ from rerun.chunk import RrdReader
 from l3mvn.errors import L3MVNError, first_line
 
 APPLICATION_ID = "l3mvn"
+DEFAULT_RECORD_DIR = "recordings"  # where recordings go when no folder is named (eval, serve)
 TIMELINE = "step"
 _NAME_PART = re.compile(r"[^A-Za-z0-9.-]+")
 _RRD_MAGIC = b"RRF2"
@@ -24,12 +29,21 @@ _RRD_END = 0
 
 
 def recording_path(recordings_dir: str | Path, dataset: str | Path, scene: str, episode_id: int,
-                   policy: str) -> Path:
-    """``<dir>/<dataset>_<scene>_<episode>_<policy>.rrd``; a dataset path contributes its folder name,
-    and anything but letters, digits, '.' and '-' becomes '-' so the name parses back unambiguously."""
+                   policy: str, tag: str | None = None) -> Path:
+    """``<dir>/<dataset>_<scene>_<episode>_<policy>[_<tag>].rrd``; a dataset path contributes its folder
+    name, and anything but letters, digits, '.' and '-' becomes '-' so the name parses back
+    unambiguously. ``tag`` tells apart several recordings of one episode (``unique_tag``)."""
     parts = [recording_name_part(Path(str(dataset)).name or str(dataset)), recording_name_part(scene),
              str(int(episode_id)), recording_name_part(policy)]
+    if tag is not None:
+        parts.append(recording_name_part(tag))
     return Path(recordings_dir) / ("_".join(parts) + ".rrd")
+
+
+def unique_tag(kind: str) -> str:
+    """A name tag no other writer uses: ``<kind>-<UTC time>-<pid>-<random>`` (sorts by time)."""
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+    return f"{kind}-{stamp}-{os.getpid()}-{secrets.token_hex(3)}"
 
 
 @dataclass(frozen=True)
@@ -43,20 +57,21 @@ class RecordingInfo:
     policy: str | None
     size_bytes: int
     mtime: float
+    tag: str | None = None  # the name's fifth part: one of several recordings of the episode (a re-run)
 
     def to_dict(self) -> dict:
         return {"path": str(self.path), "name": self.path.name, "dataset": self.dataset, "scene": self.scene,
-                "episode_id": self.episode_id, "policy": self.policy, "size_bytes": self.size_bytes,
-                "mtime": self.mtime}
+                "episode_id": self.episode_id, "policy": self.policy, "tag": self.tag,
+                "size_bytes": self.size_bytes, "mtime": self.mtime}
 
 
-def parse_recording_name(path: str | Path) -> tuple[str, str, int, str] | None:
-    """(dataset, scene, episode_id, policy) from a name made by ``recording_path``, else None."""
+def parse_recording_name(path: str | Path) -> tuple[str, str, int, str, str | None] | None:
+    """(dataset, scene, episode_id, policy, tag or None) from a name made by ``recording_path``, else None."""
     p = Path(path)
     parts = p.stem.split("_") if p.suffix == ".rrd" else []
-    if len(parts) != 4 or not parts[2].isdigit() or not all(parts):
+    if len(parts) not in (4, 5) or not parts[2].isdigit() or not all(parts):
         return None
-    return parts[0], parts[1], int(parts[2]), parts[3]
+    return parts[0], parts[1], int(parts[2]), parts[3], (parts[4] if len(parts) == 5 else None)
 
 
 def list_recordings(recordings_dir: str | Path) -> list[RecordingInfo]:
@@ -70,9 +85,11 @@ def list_recordings(recordings_dir: str | Path) -> list[RecordingInfo]:
             st = path.stat()
         except OSError:  # deleted while listing
             continue
+        if not stat.S_ISREG(st.st_mode):  # a folder, FIFO or device named *.rrd is no recording
+            continue
         parsed = parse_recording_name(path)
-        dataset, scene, episode_id, policy = parsed if parsed else (None, None, None, None)
-        out.append(RecordingInfo(path, dataset, scene, episode_id, policy, st.st_size, st.st_mtime))
+        dataset, scene, episode_id, policy, tag = parsed if parsed else (None, None, None, None, None)
+        out.append(RecordingInfo(path, dataset, scene, episode_id, policy, st.st_size, st.st_mtime, tag))
     return sorted(out, key=lambda r: (-r.mtime, r.path.name))
 
 

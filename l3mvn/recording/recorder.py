@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import logging
 import math
+import os
 import threading
 import time
 from pathlib import Path
@@ -48,11 +51,12 @@ class Recorder:
                  application_id: str = APPLICATION_ID) -> None:
         self.path = Path(path)
         self.meta = {"dataset": str(dataset), "scene": scene, "episode_id": int(episode_id), "policy": policy}
+        self._held = hold_exclusively(self.path)
         self._rec = rr.RecordingStream(application_id, send_properties=True)
         try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
             self._rec.save(self.path, default_blueprint=default_blueprint())
         except (OSError, RuntimeError, ValueError) as exc:
+            os.close(self._held)
             raise L3MVNError(f"cannot write recording {self.path}: {first_line(exc)}") from None
         self._rec.send_recording_name(f"{Path(str(dataset)).name} {scene} #{episode_id} {policy}")
         self._lock = threading.Lock()
@@ -81,9 +85,9 @@ class Recorder:
 
     @classmethod
     def for_episode(cls, recordings_dir: str | Path, dataset: str | Path, episode: Episode,
-                    policy: str) -> "Recorder":
-        """A recorder writing to ``recording_path(recordings_dir, dataset, ...)`` for ``episode``."""
-        path = recording_path(recordings_dir, dataset, episode.scene, episode.episode_id, policy)
+                    policy: str, tag: str | None = None) -> "Recorder":
+        """A recorder writing to ``recording_path(recordings_dir, dataset, ..., tag)`` for ``episode``."""
+        path = recording_path(recordings_dir, dataset, episode.scene, episode.episode_id, policy, tag)
         return cls(path, dataset=Path(str(dataset)).name or str(dataset), scene=episode.scene,
                    episode_id=episode.episode_id, policy=policy)
 
@@ -140,6 +144,7 @@ class Recorder:
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
+        os.close(self._held)  # lets the next writer of this path in, now that the file is whole
 
     # --- one event ---------------------------------------------------------------------------
     def _log_event(self, ev: StepEvent) -> None:
@@ -443,6 +448,27 @@ class Recorder:
         if self._cleared.get(entity) is False:  # only once, and only after something was shown
             self._rec.log(entity, rr.Clear(recursive=False))
             self._cleared[entity] = True
+
+
+def hold_exclusively(path: Path) -> int:
+    """Open ``path`` (creating it and its folder, changing no byte) under an exclusive ``flock`` and
+    return the descriptor that holds it. A second writer of the same path, in this process or
+    another, is refused before it could truncate or interleave with the first; the kernel drops the
+    lock with the holder, however it exits."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        raise L3MVNError(f"cannot write recording {path}: {exc.strerror or exc}") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        os.close(fd)
+        if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN):
+            raise L3MVNError(f"recording {path} is being written by another recorder; record into another "
+                             "folder or wait for it to finish") from None
+        raise L3MVNError(f"cannot lock recording {path} ({exc.strerror or exc}): record to a local disk") from None
+    return fd
 
 
 def _small_ids(ids: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from l3mvn.errors import L3MVNError
+from l3mvn.paths import plain_name
 from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
 
 # Coordinates (origin, floor height) beyond this many metres are no building's: they only turn
@@ -132,11 +133,7 @@ def load_split(dataset: str | Path, split: str, **scene_kwargs) -> dict[str, dic
 def _scene_name(path: Path, key: object) -> str:
     """A scene key names files (``<scene>_episodes.json.gz``) and keys (``scene/floor/id``), so it
     must be a plain printable name: no path separator, never ``.`` or ``..``."""
-    if not isinstance(key, str) or not key or not key.isprintable() or any(c in key for c in "/\\") \
-            or key in (".", ".."):
-        raise L3MVNError(f"{path}: scene keys must be plain names such as 'Allensville' (no '/' or '\\'), "
-                         f"got {_show(key)}")
-    return key
+    return plain_name(key, f"{path}: a scene key", "Allensville")
 
 
 def _floor_id(path: Path, name: str, key: object) -> int:
