@@ -8,7 +8,8 @@ bad file or line becomes a one-line problem beside what could be read, never an 
 from __future__ import annotations
 
 import dataclasses
-import json
+import math
+import stat
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,13 +20,14 @@ from app.map_image import png_bytes
 from l3mvn.config import Config
 from l3mvn.errors import L3MVNError, first_line
 from l3mvn.eval.job import EvalJob
-from l3mvn.eval.results import row_problem
+from l3mvn.eval.results import episode_lines
 from l3mvn.recording.catalogue import find_recording, recording_path, unique_tag
 from l3mvn.recording.video import VideoOptions, frames, read_episode
 
 ALL, FAILURES, SUCCESSES = "all", "failures", "successes"
 SORT_KEYS = ("row", "scene", "goal", "success", "spl", "dtg", "steps", "failure", "coverage")
 FRAME_HEIGHT = 320  # pixels of the recording's camera and map panels (drawn over the main view: readable)
+MAX_ROWS = 100_000  # episodes one file shows (ten times Gibson val for every policy of the paper)
 
 
 @dataclass(frozen=True)
@@ -60,45 +62,42 @@ class ResultFile:
 
 
 def list_result_files(folder: str | Path) -> list[Path]:
-    """The ``*.jsonl`` files directly in ``folder``, by name (an absent folder has none)."""
+    """The regular ``*.jsonl`` files directly in ``folder``, by name (an absent folder has none; a
+    FIFO, device or folder named like one is not offered: reading it could block)."""
     p = Path(folder)
-    return sorted(p.glob("*.jsonl")) if p.is_dir() else []
+    if not p.is_dir():
+        return []
+    found = []
+    for path in p.glob("*.jsonl"):
+        try:
+            if stat.S_ISREG(path.lstat().st_mode) or (path.is_symlink() and path.is_file()):
+                found.append(path)
+        except OSError:  # removed while listing, or a name the filesystem refuses
+            continue
+    return sorted(found)
 
 
 def load_result_file(path: str | Path) -> ResultFile:
-    """Every valid episode line of ``path``; error rows and malformed lines become problems. A file
-    with no episode line at all is an L3MVNError (it is not a result file)."""
+    """Every valid episode line of ``path`` (at most ``MAX_ROWS``); error rows and malformed lines
+    become problems naming their line. A file with no episode line at all is an L3MVNError (it is
+    not a result file)."""
     p = Path(path)
-    try:
-        lines = p.read_text(encoding="utf-8", errors="replace").splitlines()
-    except OSError as exc:
-        raise L3MVNError(f"cannot read {p.name}: {exc.strerror or exc}") from None
-    rows, problems = [], []
-    for n, line in enumerate(lines, 1):
-        if not line.strip():
-            continue
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            problems.append(f"line {n}: not JSON")
-            continue
-        if isinstance(row, dict) and "error" in row:
-            problems.append(f"line {n}: episode {row.get('key', '?')} failed to run: {first_line(str(row['error']))}")
-            continue
-        problem = row_problem(row) if isinstance(row, dict) else "not a JSON object"
-        if problem is None and not isinstance(row.get("scene"), str):
-            problem = "no scene"
-        if problem is not None:
-            problems.append(f"line {n}: {problem}")
-            continue
+    read = episode_lines(p, limit=MAX_ROWS)
+    rows = []
+    for n, row in read.rows:
         extra = row.get("extra") if isinstance(row.get("extra"), dict) else {}
-        rows.append(EpisodeRow(n, row["scene"], int(row.get("episode_id", 0)), row["goal"], row["policy"],
-                               row["success"] == 1, row["spl"], row["dtg"], row["steps"], row["failure"],
-                               extra.get("coverage"), row))
+        coverage = extra.get("coverage")
+        rows.append(EpisodeRow(n, row["scene"], row["episode_id"], row["goal"], row["policy"], row["success"] == 1,
+                               row["spl"], row["dtg"], row["steps"], row["failure"],
+                               coverage if _is_number(coverage) else None, row))
     if not rows:
         raise L3MVNError(f"{p.name} is not an eval result file: no episode line"
-                         + (f" ({problems[0]})" if problems else ""))
-    return ResultFile(p, tuple(rows), tuple(problems))
+                         + (f" ({read.problems[0]})" if read.problems else ""))
+    return ResultFile(p, tuple(rows), tuple(read.problems))
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 def filter_choices(rows: tuple[EpisodeRow, ...]) -> tuple[str, ...]:

@@ -18,23 +18,14 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from l3mvn.errors import L3MVNError  # noqa: E402
-from l3mvn.eval.results import row_problem  # noqa: E402
+from l3mvn.eval.results import episode_lines  # noqa: E402
 from l3mvn.task.failures import CLASSES, failure_table  # noqa: E402
 
 
 def usable_rows(path: Path) -> tuple[list[dict], int]:
     """The finished-episode rows of a result file, and how many lines were not (torn, error, invalid)."""
-    rows, unusable = [], 0
-    for line in path.read_text(errors="replace").splitlines():
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            row = None
-        if isinstance(row, dict) and "error" not in row and row_problem(row) is None:
-            rows.append(row)
-        elif line.strip():
-            unusable += 1
-    return rows, unusable
+    read = episode_lines(path)
+    return [row for _, row in read.rows], len(read.problems)
 
 
 def main() -> int:

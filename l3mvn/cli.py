@@ -98,11 +98,11 @@ class Command:
 def _library_commands() -> dict[str, Command]:
     """Commands whose arguments and run live beside what they drive."""
     from l3mvn.datasets import hm3d_export
-    from l3mvn.recording import video
+    from l3mvn.eval import result_videos
 
     return {
         "export": Command("write an MP4 (--gif: and a GIF) of a recorded episode, or of the (failed) episodes of "
-                          "a result file", video.add_export_arguments, video.run_export),
+                          "a result file", result_videos.add_export_arguments, result_videos.run_export),
         "export-hm3d": Command("export procedural houses as scans in HM3D's layout, with an objectnav_hm3d_v2 "
                                "episode file (to run them here and on habitat-sim)", hm3d_export.add_export_arguments,
                                hm3d_export.run_export),
@@ -459,7 +459,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
 def _episode_video(row: dict, args: argparse.Namespace, bar) -> None:
     """``eval --video``: the finished episode's recording as an MP4 (a local run's recordings only)."""
-    from l3mvn.recording.video import export_result_video
+    from l3mvn.eval.result_videos import export_result_video
 
     try:
         export_result_video(row, args.record_dir, args.video)

@@ -75,12 +75,13 @@ def test_bad_files_and_lines_are_one_line_problems(evaluated, tmp_path):
                                 json.dumps({**json.loads(good[1]), "spl": "high"})]) + "\n")
     f = load_result_file(mixed)
     assert len(f.rows) == 1
-    assert f.problems[0] == "line 2: not JSON" and "failed to run: boom" in f.problems[1]
+    assert f.problems[0].startswith("line 2: not JSON (") and "failed to run: boom" in f.problems[1]
     assert f.problems[2].startswith("line 4: ") and "spl" in f.problems[2]
     assert all("\n" not in p for p in f.problems)
     notes = tmp_path / "notes.jsonl"
     notes.write_text("hello\n")
-    with pytest.raises(L3MVNError, match=r"^notes.jsonl is not an eval result file: no episode line \(line 1: not JSON\)$"):
+    with pytest.raises(L3MVNError, match=r"^notes.jsonl is not an eval result file: no episode line "
+                                         r"\(line 1: not JSON \(Expecting value at column 1\)\)$"):
         load_result_file(notes)
 
 
@@ -186,3 +187,31 @@ def test_the_panel_starts_on_a_folder_whose_first_file_is_not_results(evaluated,
         dash.stop()
     with pytest.raises(L3MVNError, match="--results .* is not a folder"):
         start_dashboard(port=free_port(), results_dir=tmp_path / "absent")
+
+
+def test_hostile_files_in_the_results_folder_neither_crash_nor_hang_the_dashboard(evaluated, tmp_path):
+    """A FIFO named like a result file is not offered (reading it would block forever); a file whose
+    lines hold bad episode ids, NaN, a line nested 200,000 deep and one longer than the line limit
+    opens with each of those lines named as a problem."""
+    from app.server import start_dashboard
+    from l3mvn.eval.results import MAX_LINE_BYTES
+
+    os.mkfifo(tmp_path / "a.jsonl")
+    good = (evaluated / "frontier.jsonl").read_text().splitlines()
+    row = json.loads(good[0])
+    hostile = [json.dumps({**row, "episode_id": v}) for v in ("abc", [1])]
+    hostile += [good[0].replace('"dtg": ', '"dtg": NaN, "was": '), "[" * 200_000 + "]" * 200_000,
+                '"' + "x" * (MAX_LINE_BYTES + 10) + '"', good[1]]
+    (tmp_path / "b.jsonl").write_text("\n".join(hostile) + "\n")
+    dash = start_dashboard(port=free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, results_dir=tmp_path,
+                           recordings_dir=evaluated / "rec")
+    try:
+        panel = dash.view.results
+        assert tuple(panel.file.options) == ("b.jsonl",)
+        assert [r.index for r in panel._file.rows] == [6]
+        problems = panel._file.problems
+        assert [p.split(":")[0] for p in problems] == [f"line {n}" for n in range(1, 6)]
+        assert "'episode_id' is \"abc\"" in problems[0] and "NaN" in problems[2]
+        assert "nested deeper" in problems[3] and "longer than" in problems[4]
+    finally:
+        dash.stop()

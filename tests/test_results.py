@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from l3mvn.cli import main
-from l3mvn.eval.results import row_problem
+from l3mvn.eval.results import parse_line, row_problem
 
 REPO = Path(__file__).resolve().parents[1]
 METRICS = ("key", "success", "spl", "dtg", "steps", "failure")
@@ -35,11 +35,8 @@ def usable_keys(out: Path) -> list[str]:
     """Keys of the rows a summary may count, one entry per such row (so duplicates show)."""
     keys = []
     for line in lines_of(out):
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            continue
-        if row_problem(row) is None:
+        row, problem = parse_line(line)
+        if problem is None and row_problem(row) is None:
             keys.append(row["key"])
     return keys
 
@@ -136,7 +133,8 @@ def test_unusable_rows_are_reported_in_one_line_and_run_again(tiny_dataset, fini
 
 def valid_row() -> dict:
     return {"key": "Tiny/0/1", "policy": "oracle", "config_hash": "abc", "rule": "semexp", "goal": "bed",
-            "success": 1.0, "spl": 0.8, "dtg": 0.0, "failure": "success", "steps": 30}
+            "success": 1.0, "spl": 0.8, "dtg": 0.0, "failure": "success", "steps": 30, "scene": "Tiny",
+            "episode_id": 1}
 
 
 @pytest.mark.parametrize("change,problem", [
@@ -155,6 +153,11 @@ def valid_row() -> dict:
     ({"rule": "geodesic"}, "but this config's rule is 'semexp'"),
     ({"goal": {"name": "bed"}}, "'goal' is {\"name\": \"bed\"}"),
     ({"key": None}, "'key' is null"),
+    ({"episode_id": "abc"}, "'episode_id' is \"abc\", not a whole number >= 0"),
+    ({"episode_id": math.inf}, "'episode_id' is Infinity"),
+    ({"episode_id": [1]}, "'episode_id' is [1]"),
+    ({"episode_id": 1.0}, "'episode_id' is 1.0"),
+    ({"scene": ""}, "'scene' is \"\", not a scene name"),
 ])
 def test_row_problem_names_the_first_field_the_summary_cannot_use(change, problem):
     found = row_problem({**valid_row(), **change}, "semexp")
@@ -167,6 +170,27 @@ def test_row_problem_names_the_first_field_the_summary_cannot_use(change, proble
 ])
 def test_row_problem_of_rows_without_metrics(row, problem):
     assert row_problem(row) == problem
+
+
+def test_hostile_lines_are_reported_and_their_episodes_run_again(tiny_dataset, finished, capsys):
+    """Values JSON allows but no row holds, NaN, a line nested 200,000 deep and one of 5 MB: each is
+    one unusable line, never a traceback, and each of their episodes runs again exactly once."""
+    lines = lines_of(finished)
+    rows = [json.loads(line) for line in lines]
+    hostile = [
+        json.dumps({**rows[0], "episode_id": "abc"}).encode(),
+        json.dumps({**rows[1], "episode_id": [1]}).encode(),
+        json.dumps({**rows[2], "spl": 0.5}).encode().replace(b'"spl": 0.5', b'"spl": 1e400'),
+        json.dumps({**rows[3], "dtg": 1.0}).encode().replace(b'"dtg": 1.0', b'"dtg": NaN'),
+        b'{"key": "' + rows[4]["key"].encode() + b'", "x": ' + b"[" * 200_000 + b"]" * 200_000 + b"}",
+        b'{"key": "' + rows[5]["key"].encode() + b'", "x": "' + b"y" * (5 << 20) + b'"}',
+    ]
+    finished.write_bytes(b"\n".join(hostile) + b"\n" + b"".join(lines[6:]))
+    assert main(eval_args(tiny_dataset, finished, "--resume")) == 0
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.err
+    assert "6 lines cannot be used, their episodes run again" in captured.err and "6 to run" in captured.err
+    assert sorted(usable_keys(finished)) == sorted(r["key"] for r in rows)
 
 
 # --- one writer at a time --------------------------------------------------------------------------

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import re
 import sys
 
 import cv2
@@ -16,10 +17,8 @@ from l3mvn.episodes import generate_episodes
 from l3mvn.errors import L3MVNError
 from l3mvn.events import EventBus
 from l3mvn.recording import Recorder, read_recording
-from l3mvn.recording.video import (
-    PANEL_BG, VideoOptions, add_export_arguments, frames, export_result_video, export_video, read_episode,
-    result_video_name, run_export,
-)
+from l3mvn.eval.result_videos import add_export_arguments, export_result_video, result_video_name, run_export
+from l3mvn.recording.video import PANEL_BG, VideoOptions, export_video, frames, read_episode
 from l3mvn.runner import Runner
 from l3mvn.scenes.procedural import generate_house
 
@@ -194,7 +193,8 @@ def test_bad_options_and_names_are_one_line_errors(recorded, tmp_path):
 def _row(path, **kw):
     ep = read_episode(path)
     row = {"key": f"{ep.scene}/0/{ep.episode_id}", "scene": ep.scene, "episode_id": int(ep.episode_id),
-           "policy": ep.policy, "success": 0.0, "failure": "unseen_in_explored"}
+           "policy": ep.policy, "success": 0.0, "failure": "unseen_in_explored", "config_hash": "c0ffee",
+           "rule": "semexp", "goal": "chair", "spl": 0.0, "dtg": 2.5, "steps": 40}
     return {**row, **kw}
 
 
@@ -240,6 +240,7 @@ def test_the_export_command_single_and_batch(recorded, tmp_path, capsys):
     (["--results", "r.jsonl"], "--results needs --recordings"),
     (["x.mp4", "--recording", "r.rrd", "--out", "d"], "go with --results"),
     (["--results", "absent.jsonl", "--recordings", ".", "--out", "d"], "results file absent.jsonl not found"),
+    (["--results", ".", "--recordings", ".", "--out", "d"], "results file . is a folder, not a regular file"),
 ])
 def test_bad_export_flags_are_one_line_cli_errors(argv, message, capsys):
     assert _cli(*argv) == 2
@@ -247,11 +248,25 @@ def test_bad_export_flags_are_one_line_cli_errors(argv, message, capsys):
     assert err.startswith("error: ") and message in err and err.count("\n") == 1
 
 
-def test_a_malformed_result_file_names_its_line(recorded, tmp_path, capsys):
+def test_malformed_result_lines_are_named_and_skipped(recorded, tmp_path, capsys):
+    """Each bad line is one line on stderr naming it; the good episode is still exported."""
+    path, _ = recorded
     bad = tmp_path / "r.jsonl"
-    bad.write_text('{"scene": "a", "success": 0}\n{oops\n')
-    assert _cli("--results", str(bad), "--recordings", str(tmp_path), "--out", str(tmp_path / "o")) == 2
-    assert "r.jsonl line 2 is not JSON" in capsys.readouterr().err
+    lines = ['{"scene": "a", "success": 0}', "{oops", json.dumps(_row(path)), json.dumps(_row(path, episode_id="abc")),
+             json.dumps(_row(path)).replace('"dtg": 2.5', '"dtg": 1e400'), "[" * 100_000 + "]" * 100_000,
+             json.dumps(_row(path)).replace('"spl": 0.0', '"spl": NaN'), json.dumps(_row(path, episode_id=[1]))]
+    bad.write_text("\n".join(lines) + "\n")
+    assert _cli("--results", str(bad), "--recordings", str(path.parent), "--out", str(tmp_path / "o"),
+                "--height", "160") == 0
+    err = capsys.readouterr().err.splitlines()
+    assert [re.search(r"r\.jsonl: skipped line (\d+): ", line).group(1) for line in err] == list("1245678")
+    assert "line 4: 'episode_id' is \"abc\", not a whole number >= 0" in err[2]
+    assert "nested deeper than" in err[4] and "NaN" in err[5]
+    assert [p.name for p in (tmp_path / "o").iterdir()] == ["fail_unseen_in_explored_procedural-0003_0.mp4"]
+    only_bad = tmp_path / "only_bad.jsonl"
+    only_bad.write_text("{oops\n")
+    assert _cli("--results", str(only_bad), "--recordings", str(path.parent), "--out", str(tmp_path / "o")) == 2
+    assert "only_bad.jsonl holds no episode line to export (first problem: line 1: not JSON" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("at", [(2, 60), (318, 60), (160, 1), (160, 118), (1, 1), (318, 118)])

@@ -16,6 +16,14 @@ The ``--out`` file is held by one run at a time (``ResultWriter``):
 * **Validation.** A row is used (skipped by ``--resume``, counted in the summary) only when it holds
   every field the summary reads, with the right type (``ROW_SCHEMA``); any other line of this run's
   policy and config is reported and its episode runs again, never a crash.
+
+This module owns the format: every reader (``--resume``, the dashboard's Results panel, ``export
+--results``) reads lines through ``read_result_lines`` and judges rows with ``row_problem``, and the
+one writer encodes them with ``encode_row``. Reading streams one line at a time and never trusts the
+file: only regular files are opened (a FIFO would block the reader forever), a line longer than
+``MAX_LINE_BYTES`` is skipped without being held in memory, and a line that is not UTF-8, not JSON,
+nested deeper than ``MAX_DEPTH`` or holding NaN or an infinite number is a problem of its line, never
+an exception.
 """
 
 from __future__ import annotations
@@ -30,14 +38,16 @@ import time
 from contextlib import suppress
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, BinaryIO, Callable, Iterable, Iterator
 
 from l3mvn.config import SUCCESS_RULES
-from l3mvn.errors import L3MVNError
+from l3mvn.errors import L3MVNError, first_line
 from l3mvn.eval.job import is_error_row
 from l3mvn.task.scoring import FAILURE_CAUSES
 
 _CHUNK = 1 << 16
+MAX_LINE_BYTES = 1 << 22  # a row with its config, timings and a traceback is a few KB; beyond this it is no row
+MAX_DEPTH = 32  # a row nests its config sections and timings a few levels deep
 
 
 # --- the row schema ----------------------------------------------------------------------------
@@ -54,8 +64,9 @@ def _count(v: Any) -> bool:
     return isinstance(v, int) and not isinstance(v, bool) and v >= 0
 
 
-# Every field that --resume and the summary read, with the check it must pass and what that check
-# expects (for the report). The first three say whose row it is; the rest are the metrics.
+# Every field that --resume, the summary, the dashboard and export read, with the check it must pass
+# and what that check expects (for the report). The first three say whose row it is, then the
+# metrics, then which episode it was.
 ROW_SCHEMA: tuple[tuple[str, Callable[[Any], bool], str], ...] = (
     ("key", _text, "a scene/floor/episode key"),
     ("policy", _text, "a policy name"),
@@ -67,6 +78,8 @@ ROW_SCHEMA: tuple[tuple[str, Callable[[Any], bool], str], ...] = (
     ("dtg", lambda v: v is None or (_number(v) and v >= 0), "a number >= 0 or null"),
     ("failure", lambda v: v in FAILURE_CAUSES, "a failure cause (success, false_stop, ...)"),
     ("steps", _count, "a whole number >= 0"),
+    ("scene", _text, "a scene name"),
+    ("episode_id", _count, "a whole number >= 0"),
 )
 
 
@@ -92,6 +105,159 @@ def _shown(value: Any) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
+# --- lines -------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ResultLine:
+    """One non-blank line of a result file: its JSON value, or why it has none."""
+
+    number: int  # 1-based
+    row: Any  # the parsed value (None when ``problem`` is set)
+    problem: str | None  # not a JSON value at all: too long, not UTF-8, not JSON, too deep, NaN
+
+
+def encode_row(row: dict) -> bytes:
+    """``row`` as one line of the file. NaN and infinities, which JSON has no words for, are written
+    as null, so every reader can read every line this program writes."""
+    try:
+        text = json.dumps(row, sort_keys=True, allow_nan=False)
+    except ValueError:
+        text = json.dumps(_finite(row), sort_keys=True, allow_nan=False)
+    return (text + "\n").encode()
+
+
+def _finite(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
+
+
+def parse_line(line: bytes) -> tuple[Any, str | None]:
+    """The JSON value of one line, or (None, why it has none)."""
+    try:
+        text = line.decode("utf-8")
+    except UnicodeDecodeError:
+        return None, "not UTF-8 text"
+    try:
+        value = json.loads(text, parse_constant=_no_constant, parse_float=_finite_float)
+    except json.JSONDecodeError as exc:
+        return None, f"not JSON ({exc.msg} at column {exc.colno})"
+    except RecursionError:
+        return None, f"nested deeper than {MAX_DEPTH} levels"
+    except ValueError as exc:  # NaN, Infinity or a number too large for a float
+        return None, str(exc)
+    if _depth(value) > MAX_DEPTH:
+        return None, f"nested deeper than {MAX_DEPTH} levels"
+    return value, None
+
+
+def _no_constant(name: str) -> None:
+    raise ValueError(f"holds {name}, which is not a number JSON allows")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"holds {text[:20]}, a number too large for a float")
+    return value
+
+
+def _depth(value: Any) -> int:
+    """How deep lists and objects nest in ``value`` (a scalar is 0), without recursion."""
+    deepest, todo = 0, [(value, 1)]
+    while todo:
+        item, level = todo.pop()
+        children = item.values() if isinstance(item, dict) else item if isinstance(item, list) else None
+        if children is None:
+            continue
+        deepest = max(deepest, level)
+        if level <= MAX_DEPTH:
+            todo.extend((child, level + 1) for child in children)
+    return deepest
+
+
+def read_lines(fh: BinaryIO) -> Iterator[ResultLine]:
+    """Every non-blank line of an open binary file, one at a time (see the module docstring)."""
+    number = 0
+    while True:
+        line = fh.readline(MAX_LINE_BYTES + 1)
+        if not line:
+            return
+        number += 1
+        if len(line) > MAX_LINE_BYTES and not line.endswith(b"\n"):
+            while (rest := fh.readline(_CHUNK)) and not rest.endswith(b"\n"):
+                pass  # the rest of an overlong line is skipped, never held
+            yield ResultLine(number, None, f"longer than {MAX_LINE_BYTES >> 20} MiB")
+            continue
+        if not line.strip():
+            continue
+        row, problem = parse_line(line)
+        yield ResultLine(number, row, problem)
+
+
+def read_result_lines(path: str | Path) -> Iterator[ResultLine]:
+    """The lines of the result file ``path`` (a one-line L3MVNError when it cannot be opened or is
+    not a regular file)."""
+    with open_regular(Path(path), "results file") as fh:
+        yield from read_lines(fh)
+
+
+def open_regular(path: Path, what: str) -> BinaryIO:
+    """``path`` opened for reading when it is a regular file. It is opened without blocking and
+    checked before a byte is read: a FIFO or a device would otherwise hang or stream forever."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except FileNotFoundError:
+        raise L3MVNError(f"{what} {_name(path)} not found") from None
+    except OSError as exc:
+        raise L3MVNError(f"cannot read {what} {_name(path)}: {_reason(exc)}") from None
+    kind = stat.S_IFMT(os.fstat(fd).st_mode)
+    if kind != stat.S_IFREG:
+        os.close(fd)
+        shown = {stat.S_IFDIR: "a folder", stat.S_IFIFO: "a FIFO", stat.S_IFCHR: "a device",
+                 stat.S_IFBLK: "a device", stat.S_IFSOCK: "a socket"}.get(kind, "not a regular file")
+        raise L3MVNError(f"{what} {_name(path)} is {shown}, not a regular file")
+    os.set_blocking(fd, True)
+    return os.fdopen(fd, "rb")
+
+
+@dataclass
+class EpisodeLines:
+    """The episode rows of a result file, each with its line number, and one problem per line left out."""
+
+    rows: list[tuple[int, dict]] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+
+def episode_lines(path: str | Path, *, limit: int | None = None) -> EpisodeLines:
+    """Every countable episode row of ``path`` (``row_problem`` is None), at most ``limit`` of them;
+    every other line becomes ``"line N: why"`` (an error row says which episode failed and why)."""
+    found = EpisodeLines()
+    for line in read_result_lines(path):
+        problem = line.problem
+        if problem is None and isinstance(line.row, dict) and is_error_row(line.row):
+            key = line.row.get("key") if _text(line.row.get("key")) else "?"
+            problem = f"episode {key} failed to run: {_shorter(first_line(str(line.row['error'])))}"
+        elif problem is None:
+            problem = row_problem(line.row)
+        if problem is not None:
+            found.problems.append(f"line {line.number}: {problem}")
+        elif limit is not None and len(found.rows) >= limit:
+            found.problems.append(f"line {line.number}: past the first {limit} episodes, not read")
+            break
+        else:
+            found.rows.append((line.number, line.row))
+    return found
+
+
+def _shorter(text: str) -> str:
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
 # --- reading back for --resume -----------------------------------------------------------------
 
 @dataclass
@@ -111,15 +277,13 @@ class Previous:
         return f"{_name(Path(path))}: {n} {lines} be used, their episodes run again (first: {self.unusable[0]})"
 
 
-def previous_rows(lines: Iterable[bytes], policy: str, config_hash: str, rule: str) -> Previous:
+def previous_rows(lines: Iterable[ResultLine], policy: str, config_hash: str, rule: str) -> Previous:
     """Sort a result file's lines for a resumed run. Rows of another policy or config are left
     alone; error rows are retried silently (that is their purpose); every other line that fails
     ``row_problem`` is listed as unusable. A key finished more than once keeps its last row."""
     found = Previous()
-    for number, line in enumerate(lines, 1):
-        if not line.strip():
-            continue
-        row, problem = _parse(line)
+    for line in lines:
+        number, row, problem = line.number, line.row, line.problem
         if problem is None:
             if _foreign(row, policy, config_hash) or _retried(row):
                 continue
@@ -130,15 +294,6 @@ def previous_rows(lines: Iterable[bytes], policy: str, config_hash: str, rule: s
         else:
             found.rows[row["key"]] = row
     return found
-
-
-def _parse(line: bytes) -> tuple[Any, str | None]:
-    try:
-        return json.loads(line.decode("utf-8")), None
-    except UnicodeDecodeError:
-        return None, "not UTF-8 text"
-    except json.JSONDecodeError as exc:
-        return None, f"not JSON ({exc.msg} at column {exc.colno})"
 
 
 def _retried(row: Any) -> bool:
@@ -214,7 +369,7 @@ class ResultWriter:
         file holds whole lines only and every row written before stays."""
         if self._fd is None:
             return
-        data = (json.dumps(row, sort_keys=True) + "\n").encode()
+        data = encode_row(row)
         start, done = None, 0
         try:
             start = os.fstat(self._fd).st_size if self._regular else None
@@ -260,11 +415,11 @@ class ResultWriter:
             raise L3MVNError(f"cannot write to {_name(self.path)} and cannot cut back the partial line it "
                              f"left ({_reason(exc)}); the next run sets it aside") from None
 
-    def _lines(self) -> Iterator[bytes]:
+    def _lines(self) -> Iterator[ResultLine]:
         try:
             with os.fdopen(os.dup(self._fd), "rb") as fh:  # the dup shares the lock; closing it keeps it
                 fh.seek(0)
-                yield from fh
+                yield from read_lines(fh)
         except OSError as exc:
             raise L3MVNError(f"cannot read {_name(self.path)}: {_reason(exc)}") from None
 
@@ -340,7 +495,7 @@ def _repair_tail(fd: int, path: Path) -> str | None:
         return None
     start = _last_line_start(fd, size)
     tail = os.pread(fd, size - start, start)
-    row, problem = _parse(tail)
+    row, problem = parse_line(tail)
     if problem is None and isinstance(row, dict):
         os.write(fd, b"\n")
         return f"{_name(path)}: its last line had no newline (the row is whole); added one"

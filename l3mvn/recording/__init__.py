@@ -36,15 +36,7 @@ from l3mvn.recording.catalogue import (
 )
 from l3mvn.recording.layout import MapBounds, default_blueprint, map_view_bounds
 from l3mvn.recording.recorder import Recorder
-from l3mvn.recording.video import (
-    VideoOptions,
-    VideoResult,
-    add_export_arguments,
-    export_result_video,
-    export_video,
-    read_episode,
-    run_export,
-)
+from l3mvn.recording.video import VideoOptions, VideoResult, export_video, read_episode
 from l3mvn.recording.replay import (
     DEFAULT_WEB_PORT,
     add_replay_arguments,
@@ -55,8 +47,7 @@ from l3mvn.recording.replay import (
 
 __all__ = [
     "APPLICATION_ID", "DEFAULT_WEB_PORT", "TIMELINE", "MapBounds", "Recorder", "RecordingInfo", "RecordingSummary",
-    "VideoOptions", "VideoResult", "add_export_arguments", "add_replay_arguments", "default_blueprint",
-    "export_result_video", "export_video", "find_recording", "list_recordings", "map_view_bounds", "open_recording",
-    "parse_recording_name", "read_episode", "read_recording", "recording_path", "run_export", "run_replay",
+    "VideoOptions", "VideoResult", "add_replay_arguments", "default_blueprint", "export_video", "find_recording", "list_recordings", "map_view_bounds", "open_recording",
+    "parse_recording_name", "read_episode", "read_recording", "recording_path", "run_replay",
     "viewer_executable", "web_viewer_url",
 ]

@@ -1,4 +1,4 @@
-"""``l3mvn export``: a video of a recorded episode, read back from its ``.rrd`` alone.
+"""A video of a recorded episode, read back from its ``.rrd`` alone (``l3mvn export`` writes them).
 
 One frame per recorded step: the RGB frame beside the top-down map (cropped to what the episode
 mapped, the target category boxed, frontiers coloured by score, the best three and the chosen one
@@ -11,11 +11,8 @@ rerun's own reader: each entity's value at a step is its latest value logged at 
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import re
-import sys
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +21,7 @@ import cv2
 import numpy as np
 
 from l3mvn.errors import L3MVNError, first_line
-from l3mvn.recording.catalogue import TIMELINE, find_recording, open_recording, recording_name_part
+from l3mvn.recording.catalogue import TIMELINE, open_recording
 from l3mvn.recording.layout import AGENT_RGB, GOAL_RGB, TARGET_RGB, VIEW_MARGIN, score_colors
 from l3mvn.viz import COLLISION_RGB
 
@@ -640,111 +637,3 @@ def _write_gif(ep: RecordedEpisode, options: VideoOptions, path: Path) -> Path:
     except OSError as exc:
         raise L3MVNError(f"cannot write GIF {path}: {first_line(exc)}") from None
     return path
-
-
-def result_video_name(row: dict, *, with_policy: bool = False) -> str:
-    """``<outcome>_<scene>_<episode>[_<policy>].mp4``, outcome ``success`` or ``fail_<cause>``."""
-    outcome = "success" if _float(row.get("success")) == 1.0 else f"fail_{recording_name_part(str(row.get('failure')))}"
-    parts = [outcome.replace("-", "_"), recording_name_part(str(row["scene"])), str(int(row["episode_id"]))]
-    if with_policy:
-        parts.append(recording_name_part(str(row["policy"])))
-    return "_".join(parts) + ".mp4"
-
-
-def export_result_video(row: dict, recordings_dir: str | Path, out_dir: str | Path,
-                        options: VideoOptions = VideoOptions(), *, with_policy: bool = False,
-                        gif: bool = False) -> VideoResult:
-    """The video of one result line (``l3mvn eval`` writes them), from its recording in
-    ``recordings_dir`` (the newest, if several datasets share the folder), named by outcome."""
-    missing = [k for k in ("scene", "episode_id", "policy") if k not in row]
-    if missing:
-        raise L3MVNError(f"result line {row.get('key', '?')} lacks {', '.join(missing)}: not an eval result")
-    found = find_recording(recordings_dir, row["scene"], int(row["episode_id"]), row["policy"])
-    if found is None:
-        raise L3MVNError(f"no recording of {row['scene']} episode {row['episode_id']} ({row['policy']}) in "
-                         f"{recordings_dir}: run eval with --record")
-    return export_video(found, Path(out_dir) / result_video_name(row, with_policy=with_policy), options, gif=gif)
-
-
-def read_results(path: str | Path) -> list[dict]:
-    """The episode lines of an eval result file (error lines, without ``success``, are left out)."""
-    p = Path(path)
-    if not p.is_file():
-        raise L3MVNError(f"results file {p} not found")
-    rows = []
-    with p.open(encoding="utf-8", errors="replace") as f:
-        for n, line in enumerate(f, 1):
-            if not line.strip():
-                continue
-            try:
-                row = json.loads(line)
-            except json.JSONDecodeError:
-                raise L3MVNError(f"{p} line {n} is not JSON: not an eval result file") from None
-            if not isinstance(row, dict):
-                raise L3MVNError(f"{p} line {n} is not a JSON object: not an eval result file")
-            if "success" in row:
-                rows.append(row)
-    return rows
-
-
-# --- the command -----------------------------------------------------------------------------
-
-def add_export_arguments(parser: argparse.ArgumentParser) -> None:
-    """``l3mvn export VIDEO.mp4 --recording FILE.rrd`` or ``--results FILE --recordings DIR --out DIR``."""
-    parser.add_argument("video", nargs="?", help="the MP4 to write (one recording)")
-    parser.add_argument("--recording", help="the .rrd to export (l3mvn eval --record writes them)")
-    parser.add_argument("--results", help="batch: an eval result file (.jsonl); one video per episode line")
-    parser.add_argument("--recordings", help="batch: the folder holding the recordings of --results")
-    parser.add_argument("--out", help="batch: the folder to write <outcome>_<scene>_<episode>.mp4 into")
-    parser.add_argument("--failures", action="store_true", help="batch: only the episodes that failed")
-    parser.add_argument("--gif", action="store_true", help="also write a GIF beside each MP4 (for READMEs)")
-    defaults = VideoOptions()
-    parser.add_argument("--fps", type=float, default=defaults.fps, help=f"steps per second (default {defaults.fps:g})")
-    parser.add_argument("--height", type=int, default=defaults.height,
-                        help=f"height of the camera and map panels in pixels (default {defaults.height})")
-    parser.add_argument("--title-seconds", type=float, default=defaults.title_s,
-                        help=f"how long the title card with the outcome shows (default {defaults.title_s:g})")
-
-
-def run_export(args: argparse.Namespace) -> int:
-    options = VideoOptions(fps=args.fps, height=args.height, title_s=args.title_seconds)
-    if args.results is None:
-        if args.video is None or args.recording is None:
-            raise L3MVNError("export needs VIDEO.mp4 --recording FILE.rrd, or --results FILE.jsonl --recordings DIR "
-                             "--out DIR")
-        if args.recordings or args.out or args.failures:
-            raise L3MVNError("--recordings, --out and --failures go with --results (batch export), not --recording")
-        _report(export_video(args.recording, args.video, options, gif=args.gif))
-        return 0
-    if args.video or args.recording:
-        raise L3MVNError("--results exports a batch into --out: drop VIDEO.mp4 and --recording")
-    if not args.recordings or not args.out:
-        raise L3MVNError("--results needs --recordings DIR (the .rrd files) and --out DIR (where videos go)")
-    if not Path(args.recordings).is_dir():
-        raise L3MVNError(f"recordings folder {args.recordings} not found")
-    rows = read_results(args.results)
-    chosen = [r for r in rows if not args.failures or _float(r.get("success")) != 1.0]
-    if not chosen:
-        print(f"{args.results}: no {'failed ' if args.failures else ''}episodes: nothing to export")
-        return 0
-    with_policy = len({r.get("policy") for r in chosen}) > 1
-    skipped = []
-    for row in chosen:
-        try:
-            _report(export_result_video(row, args.recordings, args.out, options, with_policy=with_policy,
-                                        gif=args.gif))
-        except L3MVNError as exc:
-            skipped.append(f"{row.get('key', row.get('scene'))}: {exc}")
-    for line in skipped:
-        print(f"skipped {line}", file=sys.stderr)
-    if len(skipped) == len(chosen):
-        raise L3MVNError(f"no video written: none of the {len(chosen)} episodes could be exported (first: "
-                         f"{skipped[0]})")
-    print(f"wrote {len(chosen) - len(skipped)} videos to {args.out}" + (f", skipped {len(skipped)}" if skipped else ""))
-    return 0
-
-
-def _report(v: VideoResult) -> None:
-    gif = f" and {v.gif}" if v.gif else ""
-    print(f"wrote {v.path}{gif}: {v.frames} frames ({v.title_frames} title + {v.steps} steps), {v.width}x{v.height} "
-          f"at {v.fps:g} fps")
