@@ -238,6 +238,8 @@ def run_side(source: EpisodeSource, key: str, contender: Contender, record_dir: 
     row = job.run_one(key, record_tag=tag)
     if "error" in row:
         raise L3MVNError(f"running {key} with {contender.policy} failed: {first_line(str(row['error']))}")
+    if row.get("recording_error"):
+        raise L3MVNError(f"running {key} with {contender.policy}: {row['recording_error']}")
     found = recording_path(folder, job.load().name, row["scene"], int(row["episode_id"]), contender.policy, tag)
     if not found.is_file():
         raise L3MVNError(f"running {key} with {contender.policy} wrote no recording in {folder}")

@@ -217,6 +217,8 @@ def rerun(row: dict, *, dataset: str | None, split: str, houses: int, episodes_p
     new = job.run_one(key, record_tag=tag)
     if "error" in new:
         raise L3MVNError(f"re-running {key} failed: {first_line(str(new['error']))}")
+    if new.get("recording_error"):
+        raise L3MVNError(f"re-running {key}: {new['recording_error']}")
     fields = ("success", "spl", "dtg", "steps", "failure")
     recording = recording_path(record_dir, job.load().name, new["scene"], new["episode_id"], job.policy, tag)
     if not recording.is_file():

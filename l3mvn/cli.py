@@ -249,6 +249,10 @@ def main(argv: list[str] | None = None, extra: dict[str, Command] | None = None)
     except L3MVNError as exc:
         print(f"error: {one_line(exc)}", file=sys.stderr)
         return 2
+    except OSError as exc:  # a disk or path failure no writer above turned into its own words
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{exc.strerror or exc}".replace("\n", "\\n"), file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("interrupted: finished episodes are saved", file=sys.stderr)
         return 130
@@ -293,6 +297,7 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 def _cmd_audit(args: argparse.Namespace) -> int:
     from l3mvn.eval.audit import audit_scenes, format_report, load_split_for_audit
+    from l3mvn.writing import write_file
 
     if args.frame is not None:
         try:
@@ -319,8 +324,7 @@ def _cmd_audit(args: argparse.Namespace) -> int:
                               all_pngs=args.all_pngs, source=source, split=split, progress=progress)
     data = report.to_json()
     if args.out:
-        path = Path(args.out) / "audit.json"
-        path.write_text(json.dumps(data, indent=1))
+        path = write_file(Path(args.out) / "audit.json", json.dumps(data, indent=1), "the audit report")
         print(f"wrote {path}", file=sys.stderr)
     print(json.dumps(data) if args.json else format_report(report))
     return 0
@@ -374,6 +378,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from l3mvn.eval.job import EvalJob, is_error_row
     from l3mvn.eval.metrics import format_summary, summarize
     from l3mvn.eval.results import ResultWriter, check_resumable, row_problem
+    from l3mvn.writing import make_folder
 
     if args.address and args.backend != "ray":
         raise L3MVNError("--address joins a Ray cluster: add --backend ray")
@@ -399,7 +404,10 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         print(geodesic_report(eset, cfg), file=sys.stderr)
     episodes = eset.episodes[: args.episodes] if args.episodes else eset.episodes
     wanted = {ep.key for ep in episodes}
+    if args.video:
+        make_folder(args.video, "--video")
     errors, interrupted = 0, False
+    unwritten: list[str] = []  # recordings and videos that did not reach the disk
     with ResultWriter(args.out) as writer:
         if writer.repair:
             print(writer.repair, file=sys.stderr)
@@ -431,8 +439,12 @@ def _cmd_eval(args: argparse.Namespace) -> int:
                         bar.write(f"{row.get('key')}: error: {problem}")
                         continue
                     results[row["key"]] = row
-                    if args.video:
-                        _episode_video(row, args, bar)
+                    if row.get("recording_error"):
+                        unwritten.append(row["recording_error"])
+                        bar.write(f"{row['key']}: error: {row['recording_error']}")
+                    elif args.video and (problem := _episode_video(row, args)):
+                        unwritten.append(problem)
+                        bar.write(f"{row['key']}: no video: {problem}")
                     done = list(results.values())
                     bar.set_postfix_str(f"SR {sum(r['success'] for r in done) / len(done):.3f} "
                                         f"SPL {sum(r['spl'] or 0 for r in done) / len(done):.3f}")
@@ -454,17 +466,22 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     print(format_summary(summary))
     if args.json:
         print(json.dumps(_json_safe(summary), sort_keys=True))
+    if unwritten and not interrupted:
+        raise L3MVNError(f"{len(unwritten)} recordings or videos were not written whole, the results are kept "
+                         f"(first: {unwritten[0]})")
     return 130 if interrupted else 0
 
 
-def _episode_video(row: dict, args: argparse.Namespace, bar) -> None:
-    """``eval --video``: the finished episode's recording as an MP4 (a local run's recordings only)."""
+def _episode_video(row: dict, args: argparse.Namespace) -> str | None:
+    """``eval --video``: the finished episode's recording as an MP4 (a local run's recordings only);
+    why it could not be written, or None."""
     from l3mvn.eval.result_videos import export_result_video
 
     try:
         export_result_video(row, args.record_dir, args.video)
     except L3MVNError as exc:
-        bar.write(f"{row['key']}: no video: {one_line(exc)}")
+        return one_line(exc)
+    return None
 
 
 def _progress(total: int):
@@ -540,6 +557,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from l3mvn.types import Pose
     from l3mvn.sim.world import build_world
     from l3mvn.viz import colorize_depth, colorize_semantic, side_by_side
+    from l3mvn.writing import write_file
 
     def writes_rgb(fmt: str) -> bool:
         """Whether PIL can encode our RGB panel as ``fmt`` (XBM, MSP, ... cannot; tried on one pixel)."""
@@ -608,10 +626,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         Image.fromarray(panel).save(encoded, format=fmt)
     except (OSError, ValueError) as exc:
         raise L3MVNError(f"--out {args.out}: cannot encode the image as {fmt} ({exc}); use .png") from None
-    try:
-        out.write_bytes(encoded.getvalue())
-    except OSError as exc:
-        raise L3MVNError(f"--out {args.out}: cannot write ({exc.strerror or exc})") from None
+    write_file(out, encoded.getvalue(), "--out")
     print(f"wrote {args.out}: {scene.key} at x={pose.x:.2f} y={pose.y:.2f} "
           f"heading={math.degrees(pose.heading):.0f} deg")
     return 0

@@ -22,6 +22,7 @@ from l3mvn.errors import L3MVNError
 from l3mvn.task.regions import goal_region
 from l3mvn.scenes.scene import GOAL_CATEGORIES, SceneMap
 from l3mvn.types import Episode, Pose
+from l3mvn.writing import write_file
 
 
 def episode_file(dataset: str | Path, split: str, scene: str) -> Path:
@@ -255,15 +256,8 @@ def episode_record(ep: Episode, scene: SceneMap) -> dict:
 
 
 def write_episode_file(path: str | Path, episodes: list[Episode], floors: dict[int, SceneMap]) -> Path:
-    path = Path(path)
     records = [episode_record(ep, floors[ep.floor]) for ep in episodes]
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with gzip.open(path, "wt", encoding="utf-8") as fh:
-            json.dump({"episodes": records}, fh)
-    except OSError as exc:
-        raise L3MVNError(f"cannot write {path}: {exc.strerror or exc}") from None
-    return path
+    return write_file(path, gzip.compress(json.dumps({"episodes": records}).encode()), "episode file")
 
 
 def generate_episodes(

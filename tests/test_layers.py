@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # Lowest first; a package may import its own layer's packages only where listed in SIBLINGS.
 LAYERS = [
     {"errors"},
-    {"types", "config", "grid", "paths"},
+    {"types", "config", "grid", "paths", "writing"},
     {"viz", "scenes", "perception", "events", "serving"},
     {"sim", "task", "language"},
     {"episodes", "mapping", "frontiers", "planning"},

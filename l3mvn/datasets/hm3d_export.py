@@ -33,6 +33,7 @@ from l3mvn.config import Config, TaskConfig
 from l3mvn.episodes import generate_episodes
 from l3mvn.errors import L3MVNError
 from l3mvn.paths import plain_name
+from l3mvn.writing import make_folder, write_file
 from l3mvn.scenes.procedural import procedural_split
 from l3mvn.scenes.scan import SemanticObject, write_semantic_txt
 from l3mvn.grid import disk
@@ -70,11 +71,8 @@ def export_hm3d(out: str | Path, houses: int, *, seed: int = 0, split: str = "va
     cfg = cfg or Config()
     out = Path(out)
     scene_root, episode_root = out / SCENE_DIR, out / EPISODE_DIR / split
-    try:
-        (episode_root / "content").mkdir(parents=True, exist_ok=True)
-        (scene_root / split).mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise L3MVNError(f"--out {out}: cannot create directories there ({exc.strerror or exc})") from None
+    make_folder(episode_root / "content", "--out")
+    make_folder(scene_root / split, "--out")
     _write_dataset_config(scene_root)
     maps = procedural_split(houses * floors, seed)
     names = sorted(maps)
@@ -83,7 +81,6 @@ def export_hm3d(out: str | Path, houses: int, *, seed: int = 0, split: str = "va
         storeys = [maps[n][0] for n in names[h * floors : (h + 1) * floors]]
         name = storeys[0].name
         folder = scene_root / split / f"{h:05d}-{name}"
-        folder.mkdir(parents=True, exist_ok=True)
         scene_id = f"hm3d_v0.2/{split}/{folder.name}/{name}.glb"
         goals, walkable = _write_scan(folder, name, storeys, cfg)
         episodes = _episodes(scene_id, storeys, walkable, goals, episodes_per_floor, seed, cfg)
@@ -103,8 +100,7 @@ def _category_tables() -> dict:
 
 
 def _write_gz(path: Path, data: dict) -> None:
-    with gzip.open(path, "wt", encoding="utf-8") as fh:
-        json.dump(data, fh)
+    write_file(path, gzip.compress(json.dumps(data).encode()), "episode file")
 
 
 def _write_dataset_config(root: Path) -> None:
@@ -113,7 +109,8 @@ def _write_dataset_config(root: Path) -> None:
                    "paths": {".glb": ["*/*.glb"]}},
         "objects": {}, "light_setups": {}, "scene_instances": {},
     }
-    (root / "hm3d_annotated_basis.scene_dataset_config.json").write_text(json.dumps(config, indent=1))
+    write_file(root / "hm3d_annotated_basis.scene_dataset_config.json", json.dumps(config, indent=1),
+               "scene dataset config")
 
 
 @dataclass
@@ -182,7 +179,7 @@ def _write_scan(folder: Path, name: str, storeys: list[SceneMap], cfg: Config) -
     material = trimesh.visual.material.PBRMaterial(baseColorTexture=image, baseColorFactor=[255, 255, 255, 255])
     stage = trimesh.Trimesh(vertices, faces, visual=trimesh.visual.TextureVisuals(uv=uv, material=material),
                             process=False)
-    (folder / f"{name}.glb").write_bytes(stage.export(file_type="glb"))
+    write_file(folder / f"{name}.glb", stage.export(file_type="glb"), "stage mesh")
     # As HM3D's: the object colours of .semantic.txt painted into the semantic mesh's texture, and
     # per vertex as linear COLOR_0 (habitat-sim requires vertex colours and reads them as linear,
     # matching the table after converting them to sRGB).
@@ -192,7 +189,7 @@ def _write_scan(folder: Path, name: str, storeys: list[SceneMap], cfg: Config) -
     visual = trimesh.visual.TextureVisuals(uv=np.repeat(uv_of[tri_id - 1], 3, axis=0), material=material)
     semantic = trimesh.Trimesh(vertices, faces, visual=visual, process=False)
     glb = _with_vertex_colours(semantic.export(file_type="glb"), np.repeat(rgb_of[tri_id - 1], 3, axis=0))
-    (folder / f"{name}.semantic.glb").write_bytes(glb)
+    write_file(folder / f"{name}.semantic.glb", glb, "semantic mesh")
     write_semantic_txt(folder / f"{name}.semantic.txt", objects)
     return goals, walkables
 

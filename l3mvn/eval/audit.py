@@ -43,6 +43,7 @@ from l3mvn.sim.simulator import BuiltinSimulator
 from l3mvn.types import Episode, Pose
 from l3mvn.sim.world import World
 from l3mvn.viz import category_color
+from l3mvn.writing import make_folder, write_file
 
 # Why an instance is not confirmable from inside its success region, most fundamental first: the
 # first that applies is reported.
@@ -477,7 +478,7 @@ def audit_scenes(scenes: dict[str, dict[int, SceneMap]], cfg: Config | None = No
     jobs = [(s, cfg, [e for e in episodes or () if (e.scene, e.floor) == (s.name, s.floor)], audit,
              None if out_dir is None else str(out_dir), all_pngs) for s in floors]
     if out_dir is not None:
-        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        make_folder(out_dir, "--out")
     done: list[FloorAudit] = []
     if workers == 1 or len(jobs) <= 1:
         for job in jobs:
@@ -621,9 +622,10 @@ def write_diagnostic_png(out_dir: str | Path, scene: SceneMap, walls: np.ndarray
             f"px {inst.max_pixels} mapped {inst.max_mapped_cells}")
     cv2.putText(panel, text, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
     path = Path(out_dir) / f"{inst.scene}_{inst.floor}_{inst.category.replace(' ', '-')}_{inst.instance_id}.png"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(path), cv2.cvtColor(panel, cv2.COLOR_RGB2BGR))
-    return path
+    ok, png = cv2.imencode(".png", cv2.cvtColor(panel, cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise L3MVNError(f"cannot encode the diagnostic picture {path.name}")
+    return write_file(path, png.tobytes(), "diagnostic picture")
 
 
 def _labels_in(labels: np.ndarray, mask: np.ndarray) -> list[int]:

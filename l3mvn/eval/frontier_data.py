@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -40,6 +41,7 @@ from l3mvn.runner import Runner
 from l3mvn.scenes.semexp import load_split
 from l3mvn.task.regions import GoalRegion
 from l3mvn.types import Episode
+from l3mvn.writing import write_file
 
 DEFAULT_FRAME = (120, 160)  # the regret bench's: the map, not the pixels, is what the prior sees
 
@@ -204,8 +206,7 @@ def generate_frontier_data(dataset: str, split: str, out: str | Path, *, seeds: 
     done, keep = read_done(out) if resume else (set(), [])
     if not resume and out.exists() and out.stat().st_size:
         raise L3MVNError(f"{out} exists; pass --resume to continue it or choose another --out")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("".join(line + "\n" for line in keep))
+    write_file(out, "".join(line + "\n" for line in keep), "--out")
     jobs = [FrontierDataJob(str(dataset), split, i, s, policy, tuple(frame), episodes_per_house)
             for s in seeds for i in indices if (eset.episodes[i].key, s) not in done]
     total, finished = len(jobs), 0
@@ -219,8 +220,7 @@ def generate_frontier_data(dataset: str, split: str, out: str | Path, *, seeds: 
             for key, seed, rows in results:
                 block = [json.dumps(r, separators=(",", ":")) for r in rows]
                 block.append(json.dumps({"done": key, "seed": seed, "choices": len(rows)}))
-                fh.write("\n".join(block) + "\n")
-                fh.flush()
+                _append(fh, "\n".join(block) + "\n", out)
                 finished += 1
                 if progress:
                     progress(finished, total)
@@ -228,6 +228,18 @@ def generate_frontier_data(dataset: str, split: str, out: str | Path, *, seeds: 
             if pool is not None:
                 pool.terminate()
     return summarise(out)
+
+
+def _append(fh, text: str, out: Path) -> None:
+    """One episode's block, on the disk before the next starts; a block cut short by a full disk
+    has no ``done`` line, so ``--resume`` drops it and walks that episode again."""
+    try:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+    except OSError as exc:
+        raise L3MVNError(f"cannot write {out}: {exc.strerror or exc}; the episodes finished before are kept "
+                         "(--resume continues)") from None
 
 
 def summarise(path: str | Path) -> dict:

@@ -135,9 +135,13 @@ class _JobState:
         t0 = time.perf_counter()
         stages, bus = _StageTotals(), EventBus()
         bus.subscribe(stages)
+        recorder, unrecorded = None, None
         if self.job.record_dir is not None:
-            Recorder.for_episode(self.job.record_dir, self.episodes.name, episode, self.job.policy,
-                                 record_tag).attach(bus)
+            try:
+                recorder = Recorder.for_episode(self.job.record_dir, self.episodes.name, episode, self.job.policy,
+                                                record_tag).attach(bus)
+            except L3MVNError as exc:  # the episode still runs: its result is worth more than its picture
+                unrecorded = str(exc)
         session = self.runner.session(self.episodes.scene_of(episode), self.job.policy, bus)
         setup_s = time.perf_counter() - t0
         session.start(episode)
@@ -154,6 +158,11 @@ class _JobState:
             "stages_ms": {k: round(v, 3) for k, v in sorted(stages.ms.items())},
         }
         row["peak_rss_mb"] = peak_rss_mb()
+        if recorder is not None:
+            recorder.close()  # already closed by the episode's last event; a no-op then
+            unrecorded = recorder.failure
+        if unrecorded:
+            row["recording_error"] = unrecorded  # the metrics stand; the recording does not
         return row
 
 

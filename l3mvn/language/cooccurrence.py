@@ -32,6 +32,7 @@ from l3mvn.errors import L3MVNError
 from l3mvn.language.rooms import Room
 from l3mvn.language.vocabulary import GOALS, canonical
 from l3mvn.scenes.scene import GIBSON_CATEGORIES
+from l3mvn.writing import write_file
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data" / "language"
 STATS_PATH = DATA_DIR / "cooccurrence.json"
@@ -153,10 +154,7 @@ def build_stats(
 
 
 def save_stats(stats: CooccurrenceStats, path: str | Path = STATS_PATH) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(stats.to_json(), indent=1) + "\n")
-    return path
+    return write_file(path, json.dumps(stats.to_json(), indent=1) + "\n", "co-occurrence statistics")
 
 
 def load_stats(path: str | Path | None = None) -> CooccurrenceStats:

@@ -13,6 +13,7 @@ and ReLU after each hidden layer. Saved as one torch file: ``{"state_dict", "met
 
 from __future__ import annotations
 
+import io
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -21,6 +22,7 @@ import torch
 from torch import nn
 
 from l3mvn.errors import L3MVNError
+from l3mvn.writing import write_file
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data" / "language"
 # "<embedder>" is the room-list head (the paper's recipe), "<embedder>-frontiers" the one trained on
@@ -73,11 +75,10 @@ class GoalHead(nn.Module):
 
 
 def save_head(head: GoalHead, meta: dict, path: str | Path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     meta = {**meta, "in_dim": head.in_dim, "n_goals": head.n_goals, "hidden": list(head.hidden)}
-    torch.save({"state_dict": {k: v.detach().cpu() for k, v in head.state_dict().items()}, "meta": meta}, path)
-    return path
+    encoded = io.BytesIO()
+    torch.save({"state_dict": {k: v.detach().cpu() for k, v in head.state_dict().items()}, "meta": meta}, encoded)
+    return write_file(path, encoded.getvalue(), "head weights")
 
 
 def load_head(path: str | Path) -> tuple[GoalHead, dict]:

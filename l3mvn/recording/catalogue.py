@@ -210,7 +210,33 @@ def _summarise(reader: RrdReader, path: Path) -> RecordingSummary:
 
 
 def _intact_length(path: Path) -> int | None:
-    """Where the whole messages of a file cut mid-message end; None if it is not cut but broken otherwise.
+    """Where the whole messages of a file cut mid-message end; None if it is not cut but broken otherwise."""
+    ending, offset = _framing(path)
+    return offset if ending == "cut" else None
+
+
+def recording_gap(path: str | Path) -> str | None:
+    """None when ``path`` is a finished recording (every message and rerun's end marker on disk);
+    else what is missing, in words: a writer that ran out of disk leaves a cut or open file."""
+    p = Path(path)
+    try:
+        ending, offset = _framing(p)
+        size = p.stat().st_size
+    except OSError as exc:
+        return f"cannot be read back ({exc.strerror or exc})"
+    if ending == "end":
+        return None
+    if ending == "cut":
+        return f"ends inside a message: its last {size - offset} of {size} bytes are incomplete"
+    if ending == "open":
+        return f"ends after {size} bytes without rerun's end marker: the writer stopped before the end"
+    return "is not a rerun recording"
+
+
+def _framing(path: Path) -> tuple[str, int]:
+    """How rerun's framing of ``path`` ends: ``("end", offset)`` at a whole end marker, ``("cut",
+    offset)`` where a message runs past the end of the file, ``("open", size)`` when the file ends
+    between messages without an end marker, ``("foreign", 0)`` when it is no rerun file at all.
 
     rerun's framing (``re_log_encoding``): a 12-byte file header starting ``RRF2``, then messages of
     a 16-byte header (kind, payload length: little-endian u64s) and the payload. Kind 0 ends the
@@ -219,20 +245,20 @@ def _intact_length(path: Path) -> int | None:
     size = path.stat().st_size
     with path.open("rb") as f:
         if f.read(len(_RRD_MAGIC)) != _RRD_MAGIC:
-            return None
+            return "foreign", 0
         offset = _RRD_FILE_HEADER
         while offset < size:
             f.seek(offset)
             header = f.read(_RRD_MESSAGE.size)
             if len(header) < _RRD_MESSAGE.size:
-                return offset
+                return "cut", offset
             kind, length = _RRD_MESSAGE.unpack(header)
             if offset + _RRD_MESSAGE.size + length > size:
-                return offset
+                return "cut", offset
             if kind == _RRD_END:
-                return None
+                return "end", offset
             offset += _RRD_MESSAGE.size + length
-    return None
+    return "open", size
 
 
 def _copy_prefix(src: Path, length: int, dst: Path) -> Path:

@@ -17,7 +17,7 @@ from scipy import ndimage as ndi
 
 from l3mvn.errors import L3MVNError, first_line
 from l3mvn.events import EventBus, StepEvent
-from l3mvn.recording.catalogue import APPLICATION_ID, TIMELINE, recording_path
+from l3mvn.recording.catalogue import APPLICATION_ID, TIMELINE, recording_gap, recording_path
 from l3mvn.recording.layout import (
     AGENT_RGB, GOAL_RGB, LABELLED_FRONTIERS, LANGUAGE_BY_GOAL, LANGUAGE_CHOSEN, TARGET_RGB, MapBounds,
     default_blueprint, map_view_bounds, score_colors,
@@ -27,6 +27,8 @@ from l3mvn.viz import BACKGROUND_RGB, COLLISION_RGB, category_color, category_pa
 
 log = logging.getLogger(__name__)
 
+SAVE_TIMEOUT_S = 20.0  # rerun opens a file in milliseconds; this long means its writer is stuck
+MIN_FREE_BYTES = 8 << 20  # free disk a recording needs to start (a long 480x640 episode writes tens of MiB)
 _GOAL_ARM_CELLS = 5.0  # half the size of the goal's cross on the map
 _TARGET_MERGE_M = 0.5  # target fragments on the map closer than this share one box
 _TARGET_MERGE_PX = 3  # and in the camera frame
@@ -54,15 +56,16 @@ class Recorder:
         self._held = hold_exclusively(self.path)
         self._rec = rr.RecordingStream(application_id, send_properties=True)
         try:
-            self._rec.save(self.path, default_blueprint=default_blueprint())
-        except (OSError, RuntimeError, ValueError) as exc:
+            _start_file(self._rec, self.path)
+        except L3MVNError:
             os.close(self._held)
-            raise L3MVNError(f"cannot write recording {self.path}: {first_line(exc)}") from None
+            raise
         self._rec.send_recording_name(f"{Path(str(dataset)).name} {scene} #{episode_id} {policy}")
         self._lock = threading.Lock()
         self._closed = False
         self._unsubscribe = None
         self._errors = 0
+        self._failure: str | None = None
         self._episode_key: str | None = None
         self._camera_categories: tuple[str, ...] | None = None
         self._map_categories: tuple[str, ...] | None = None
@@ -105,6 +108,20 @@ class Recorder:
         """Events that failed to record (each was skipped, never raised)."""
         return self._errors
 
+    @property
+    def failure(self) -> str | None:
+        """Once closed: why the file on disk is not the whole recording (rerun writes in the
+        background and reports no write error, so a full disk would otherwise pass unseen)."""
+        return self._failure
+
+    def _check_on_disk(self) -> str | None:
+        try:
+            os.fsync(self._held)  # a full disk or a quota often reports only here
+        except OSError as exc:
+            return f"recording {self.path} did not reach the disk: {exc.strerror or exc}"
+        gap = recording_gap(self.path)
+        return None if gap is None else f"recording {self.path} {gap} (is the disk full?)"
+
     def __call__(self, event: StepEvent) -> None:
         with self._lock:
             if self._closed:
@@ -137,8 +154,11 @@ class Recorder:
         try:
             self._rec.flush()
             self._rec.disconnect()  # finalises the file sink: the footer makes the .rrd seekable
-        except Exception:
-            log.exception("could not finish recording %s", self.path)
+        except Exception as exc:  # the check below says what the file lacks
+            log.warning("could not finish recording %s: %s", self.path, first_line(exc))
+        self._failure = self._check_on_disk()
+        if self._failure:
+            log.error("%s", self._failure)
         if self._errors > 1:
             log.warning("recorder %s: %d steps failed to record", self.path, self._errors)
         if self._unsubscribe is not None:
@@ -450,6 +470,28 @@ class Recorder:
             self._cleared[entity] = True
 
 
+def _start_file(rec: rr.RecordingStream, path: Path) -> None:
+    """Point ``rec`` at ``path``. rerun's ``save`` can wait for ever when its writer thread dies on
+    the first bytes (a file size limit, a quota), so it runs in a thread of its own that is given up
+    on after ``SAVE_TIMEOUT_S``: the episode goes on unrecorded instead of hanging the run."""
+    failed: list[BaseException] = []
+
+    def save() -> None:
+        try:
+            rec.save(path, default_blueprint=default_blueprint())
+        except (OSError, RuntimeError, ValueError) as exc:
+            failed.append(exc)
+
+    starter = threading.Thread(target=save, name=f"rerun-save-{path.name}", daemon=True)
+    starter.start()
+    starter.join(SAVE_TIMEOUT_S)
+    if starter.is_alive():
+        raise L3MVNError(f"cannot write recording {path}: rerun's writer did not start within {SAVE_TIMEOUT_S:g} s "
+                         "(a full disk or a file size limit?)")
+    if failed:
+        raise L3MVNError(f"cannot write recording {path}: {first_line(failed[0])}")
+
+
 def hold_exclusively(path: Path) -> int:
     """Open ``path`` (creating it and its folder, changing no byte) under an exclusive ``flock`` and
     return the descriptor that holds it. A second writer of the same path, in this process or
@@ -457,9 +499,15 @@ def hold_exclusively(path: Path) -> int:
     lock with the holder, however it exits."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
+        disk = os.statvfs(path.parent)
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_CLOEXEC, 0o644)
     except OSError as exc:
         raise L3MVNError(f"cannot write recording {path}: {exc.strerror or exc}") from None
+    free = disk.f_bavail * disk.f_frsize
+    if free < MIN_FREE_BYTES:  # rerun's file writer can block for ever on a disk with no room to start
+        os.close(fd)
+        raise L3MVNError(f"cannot write recording {path}: only {free >> 10} KiB free on its disk (a recording "
+                         f"needs a few MiB; {MIN_FREE_BYTES >> 20} MiB are asked for)")
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError as exc:

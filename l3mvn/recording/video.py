@@ -11,6 +11,7 @@ rerun's own reader: each entity's value at a step is its latest value logged at 
 
 from __future__ import annotations
 
+import io
 import math
 import re
 from collections.abc import Iterator
@@ -24,6 +25,7 @@ from l3mvn.errors import L3MVNError, first_line
 from l3mvn.recording.catalogue import TIMELINE, open_recording
 from l3mvn.recording.layout import AGENT_RGB, GOAL_RGB, TARGET_RGB, VIEW_MARGIN, score_colors
 from l3mvn.viz import COLLISION_RGB
+from l3mvn.writing import replacing_path, write_file
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX  # pictures drawn from recordings (video and the dashboard's compare view)
 PANEL_BG = (24, 24, 24)
@@ -603,24 +605,34 @@ def _num(v) -> str:
 def export_video(recording: str | Path, out: str | Path, options: VideoOptions = VideoOptions(), *,
                  gif: bool = False) -> VideoResult:
     """Write ``out`` (.mp4, OpenCV's mp4v) from ``recording``, and with ``gif`` a GIF beside it (same
-    stem; one title frame held ``title_s``, for READMEs). Raises a one-line L3MVNError on bad input."""
+    stem; one title frame held ``title_s``, for READMEs). Raises a one-line L3MVNError on bad input.
+
+    The encoder reports no write errors, so the video is written beside ``out`` and read back: only a
+    file holding every frame (a full disk leaves a few) is renamed to ``out``."""
     out = Path(out)
     if out.suffix.lower() != ".mp4":
         raise L3MVNError(f"video {out} must end in .mp4 (add --gif for a GIF beside it)")
     ep = read_episode(recording)
     geo = _Geometry.of(ep, options)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise L3MVNError(f"cannot write video {out}: {first_line(exc)}") from None
-    writer = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), options.fps, (geo.width, geo.height))
-    if not writer.isOpened():
-        raise L3MVNError(f"cannot write video {out}: OpenCV could not open it for writing")
-    try:
-        for frame in frames(ep, options):
-            writer.write(np.ascontiguousarray(frame[..., ::-1]))
-    finally:
-        writer.release()
+    expected = options.title_frames + len(ep.steps)
+
+    def whole(path: Path) -> None:
+        capture = cv2.VideoCapture(str(path))
+        found = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) if capture.isOpened() else 0
+        capture.release()
+        if found != expected:
+            raise L3MVNError(f"cannot write video {out}: {found} of its {expected} frames reached the disk (is it "
+                             "full?); nothing was written there")
+
+    with replacing_path(out, "video", check=whole) as partial:
+        writer = cv2.VideoWriter(str(partial), cv2.VideoWriter_fourcc(*"mp4v"), options.fps, (geo.width, geo.height))
+        if not writer.isOpened():
+            raise L3MVNError(f"cannot write video {out}: OpenCV could not open it for writing")
+        try:
+            for frame in frames(ep, options):
+                writer.write(np.ascontiguousarray(frame[..., ::-1]))
+        finally:
+            writer.release()
     gif_path = _write_gif(ep, options, out.with_suffix(".gif")) if gif else None
     return VideoResult(out, gif_path, options.title_frames, len(ep.steps), geo.width, geo.height, options.fps)
 
@@ -631,9 +643,10 @@ def _write_gif(ep: RecordedEpisode, options: VideoOptions, path: Path) -> Path:
     images = (Image.fromarray(f) for f in frames(ep, options, title_frames=1))
     step_ms = round(1000 / options.fps)
     durations = [max(int(options.title_s * 1000), step_ms)] + [step_ms] * len(ep.steps)
+    encoded = io.BytesIO()
     try:
         first = next(images)
-        first.save(path, save_all=True, append_images=images, duration=durations, loop=0)
-    except OSError as exc:
-        raise L3MVNError(f"cannot write GIF {path}: {first_line(exc)}") from None
-    return path
+        first.save(encoded, format="GIF", save_all=True, append_images=images, duration=durations, loop=0)
+    except (OSError, ValueError) as exc:
+        raise L3MVNError(f"cannot encode GIF {path}: {first_line(exc)}") from None
+    return write_file(path, encoded.getvalue(), "GIF")

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from l3mvn.errors import L3MVNError
+from l3mvn.writing import write_file
 
 ROOM_CONTENTS_PATH = Path(__file__).resolve().parents[1] / "data" / "room_contents.json"
 SOURCE_PACKAGE = "procthor==0.0.1.dev2"
@@ -245,8 +246,7 @@ def dump_room_contents(contents: dict) -> str:
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
     out = Path(args[0]) if args else ROOM_CONTENTS_PATH
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(dump_room_contents(build_room_contents()))
+    write_file(out, dump_room_contents(build_room_contents()), "room contents")
     print(f"wrote {out} ({out.stat().st_size // 1024} KiB)")
     return 0
 

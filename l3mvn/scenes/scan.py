@@ -33,6 +33,7 @@ from l3mvn.config import SimConfig
 from l3mvn.errors import L3MVNError
 from l3mvn.scenes.categories import SCAN_CATEGORIES, raw_category
 from l3mvn.scenes.scene import SceneMap
+from l3mvn.writing import write_file
 
 GRID_M = 0.05  # ground-truth cell, as SemExp's maps
 RAY_TOP_MARGIN_M = 1.0  # rays start this far above the highest vertex
@@ -115,7 +116,7 @@ def read_semantic_txt(path: str | Path) -> dict[int, SemanticObject]:
 def write_semantic_txt(path: str | Path, objects: list[SemanticObject]) -> None:
     lines = ["HM3D Semantic Annotations"]
     lines += [f'{o.object_id},{o.rgb:06X},"{o.name}",{o.region}' for o in objects]
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    write_file(path, "\n".join(lines) + "\n", "semantic table")
 
 
 def scene_up_axis(config: Path | None) -> tuple[float, float, float]:

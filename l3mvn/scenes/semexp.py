@@ -15,6 +15,7 @@ import numpy as np
 from l3mvn.errors import L3MVNError
 from l3mvn.paths import plain_name
 from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
+from l3mvn.writing import write_file
 
 # Coordinates (origin, floor height) beyond this many metres are no building's: they only turn
 # later arithmetic into overflows (10,000 km is far past any real map and far below float range).
@@ -224,7 +225,6 @@ def to_semexp_channels(scene: SceneMap) -> SceneMap:
 def save_split(dataset: str | Path, split: str, scenes: list[SceneMap]) -> Path:
     """Write scenes in the SemExp format (used by tests and for exporting procedural houses)."""
     out = Path(dataset) / split
-    out.mkdir(parents=True, exist_ok=True)
     raw: dict[str, dict[int, dict]] = {}
     for s in scenes:
         if s.categories != GIBSON_CATEGORIES[: len(s.categories)]:
@@ -233,7 +233,4 @@ def save_split(dataset: str | Path, split: str, scenes: list[SceneMap]) -> Path:
         raw.setdefault(s.name, {})[s.floor] = {
             "sem_map": sem, "origin": np.asarray(s.origin_cm, dtype=np.int64), "floor_height": s.floor_height_m,
         }
-    path = out / f"{split}_info.pbz2"
-    with bz2.BZ2File(path, "wb") as fh:
-        pickle.dump(raw, fh)
-    return path
+    return write_file(out / f"{split}_info.pbz2", bz2.compress(pickle.dumps(raw)), "map file")
