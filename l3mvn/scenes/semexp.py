@@ -14,6 +14,7 @@ import numpy as np
 
 from l3mvn.errors import L3MVNError
 from l3mvn.paths import plain_name
+from l3mvn.scenes.map_pickle import load_map_pickle
 from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
 from l3mvn.writing import write_file
 
@@ -64,48 +65,11 @@ def _show(value: object) -> str:
     return reprlib.repr(value).replace("\n", " ")
 
 
-def _plain_dtype(*args, **kwargs) -> np.dtype:
-    """``np.dtype`` for the unpickler, refusing object dtypes (their payload would be more pickles)
-    and flags other than the 0/1 (``align``, ``copy``) numpy writes, which newer numpy rejects noisily."""
-    if kwargs or not all(isinstance(a, (bool, int, np.bool_, np.integer)) and a in (0, 1) for a in args[1:]):
-        raise pickle.UnpicklingError("a dtype with arguments numpy never writes")
-    dtype = np.dtype(*args)
-    if dtype.hasobject:
-        raise pickle.UnpicklingError("object arrays are not part of the SemExp format")
-    return dtype
-
-
-# The only globals a SemExp ``.pbz2`` names: dicts, lists, numbers and strings need none, and numpy
-# arrays need these three (under ``numpy.core`` or, when written by numpy 2, ``numpy._core``).
-_FORMAT_GLOBALS = {
-    **{(mod, "_reconstruct"): np.ndarray.__reduce__(np.zeros(0))[0]
-       for mod in ("numpy.core.multiarray", "numpy._core.multiarray")},
-    **{(mod, "scalar"): np.float64(0).__reduce__()[0] for mod in ("numpy.core.multiarray", "numpy._core.multiarray")},
-    ("numpy", "ndarray"): np.ndarray,
-    ("numpy", "dtype"): _plain_dtype,
-}
-
-
-class _FormatUnpickler(pickle.Unpickler):
-    """Unpickles only what the format holds, so a crafted map file cannot run code.
-
-    ``pickle.load`` imports and calls any global a file names (``os.system`` included); these files
-    are downloaded from third-party mirrors, so anything outside ``_FORMAT_GLOBALS`` is refused.
-    """
-
-    def find_class(self, module: str, name: str):
-        try:
-            return _FORMAT_GLOBALS[(module, name)]
-        except KeyError:
-            raise pickle.UnpicklingError(
-                f"refuses {module}.{name}: a SemExp map holds only dicts, numbers and numpy arrays") from None
-
-
 def read_info(path: Path) -> object:
     """The raw ``{scene: {floor: record}}`` of a ``.pbz2`` file, read without executing anything."""
     try:
         with bz2.BZ2File(path) as fh:
-            return _FormatUnpickler(fh).load()
+            return load_map_pickle(fh)
     except pickle.UnpicklingError as exc:
         raise L3MVNError(f"{path} is not a SemExp map file ({' '.join(str(exc).split())})") from None
     except (OSError, EOFError, ValueError, AttributeError, ImportError, TypeError, IndexError, KeyError,
