@@ -110,14 +110,20 @@ def xy_to_cell(x: float, y: float, res: float) -> Cell:
     return int(math.floor(-y / res)), int(math.floor(x / res))
 
 
+_FARTHEST_CELL = 1e9  # farther from the origin than any map (a 48 m map has about 1,000 cells a side)
+
+
 def ray_to_cell(origin, direction, res: float) -> Cell | None:
-    """Where a click ray meets the map plane (z = 0); None when it runs parallel, away, or off to infinity."""
+    """Where a click ray meets the map plane (z = 0); None when it runs parallel, away, or so far
+    off that no map reaches there (a finite 1e308 would overflow as a cell index)."""
     oz, dz = float(origin[2]), float(direction[2])
     if abs(dz) < 1e-9 or -oz / dz < 0:
         return None
     t = -oz / dz
     x, y = float(origin[0]) + t * float(direction[0]), float(origin[1]) + t * float(direction[1])
-    return xy_to_cell(x, y, res) if math.isfinite(x) and math.isfinite(y) else None
+    if not (abs(x / res) < _FARTHEST_CELL and abs(y / res) < _FARTHEST_CELL):  # NaN and inf fail too
+        return None
+    return xy_to_cell(x, y, res)
 
 
 class DashboardView:
@@ -517,7 +523,7 @@ class DashboardView:
                 self.frontier_table.content = _no_map_markdown(self.ctl.policy_name, started=snap.event is not None)
             self.language.content = language_html(snap.map, snap.policy)  # viser sends it only when it changed
             drawn = (snap.event, snap.manual_goal)
-            if drawn == self._drawn:
+            if drawn[0] is self._drawn[0] and drawn[1] == self._drawn[1]:  # events hold arrays: by identity
                 return
             self._drawn = drawn
             if snap.event is not None and snap.event.step == 0:

@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import http
 import logging
+import math
 import threading
+import time
 from types import SimpleNamespace
 from typing import Any, Callable
 
 import viser
 import websockets.asyncio.server
+from viser.infra import _infra
 from viser._messages import GuiUpdateMessage, RunJavascriptMessage
 from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
@@ -50,6 +53,7 @@ def start_checked_server(check: RequestCheck, *, host: str = "0.0.0.0", port: in
     that does not resolve was looked up 1000 times; any other error killed its thread and left
     ``ViserServer()`` waiting forever.
     """
+    drop_malformed_frames()
     real_serve = websockets.asyncio.server.serve
     binds: list[_Bind] = []
 
@@ -159,6 +163,68 @@ def ignore_client_messages_except(server: viser.ViserServer, *kept: str) -> None
     for message_type in list(websock._incoming_handlers):
         if message_type.__name__ not in kept:
             websock.unregister_handler(message_type)
+
+
+def drop_malformed_frames() -> None:
+    """Make viser drop a frame it cannot decode, with one log line per kind of fault, connection and
+    second, instead of ending the connection with a traceback.
+
+    viser's per-connection receive loop (``viser.infra._infra._message_consumer``, looked up by name
+    when a connection opens) decodes each frame and lets any error end the connection, logged with
+    its traceback; a page that reconnects and sends garbage again fills the log and costs a fresh
+    replay of the whole page each time. The loop is replaced, process-wide and once, by one that
+    decodes the same way and skips what does not decode. ``start_checked_server`` installs it.
+    """
+    if _infra._message_consumer is _tolerant_consumer:
+        return
+    if getattr(_infra._message_consumer, "__name__", "") != "_message_consumer":
+        raise L3MVNError(f"viser {viser.__version__} no longer receives frames through "
+                         "viser.infra._infra._message_consumer (see app/viser_hooks.py)")
+    _infra._message_consumer = _tolerant_consumer
+
+
+class _FaultLog:
+    """At most one log line per (connection, kind of fault) a second; the rest are counted into it."""
+
+    def __init__(self) -> None:
+        self._last: dict[tuple[int, str], tuple[float, int]] = {}
+        self._lock = threading.Lock()
+
+    def __call__(self, connection: object, fault: BaseException) -> None:
+        key, now = (id(connection), type(fault).__name__), time.monotonic()
+        with self._lock:
+            last, skipped = self._last.get(key, (-math.inf, 0))
+            if now - last < 1.0:
+                self._last[key] = (last, skipped + 1)
+                return
+            self._last[key] = (now, 0)
+            if len(self._last) > 4096:  # connections come and go: forget the oldest
+                for old in sorted(self._last, key=lambda k: self._last[k][0])[:2048]:
+                    del self._last[old]
+        more = f" (and {skipped} more in the last second)" if skipped else ""
+        log.warning("dashboard: dropped a frame a page sent that does not decode: %s%s", _fault_line(fault), more)
+
+
+_fault_log = _FaultLog()
+
+
+def _fault_line(fault: BaseException) -> str:
+    text = " ".join(str(fault).split())
+    return f"{type(fault).__name__}: {text[:160]}"
+
+
+async def _tolerant_consumer(websocket: ServerConnection, handle_message: Callable[[Any], None],
+                             message_class: type) -> None:
+    while True:
+        raw = await websocket.recv()
+        try:
+            if not isinstance(raw, bytes):
+                raise TypeError("a text frame where the page sends binary ones")
+            message = message_class.deserialize(raw)
+        except Exception as fault:  # anything a frame can make the decoder raise
+            _fault_log(websocket, fault)
+            continue
+        handle_message(message)
 
 
 def handle_uuid(handle: Any) -> str:

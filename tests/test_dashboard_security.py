@@ -400,3 +400,31 @@ def test_garbage_frames_cost_only_the_connection_that_sent_them(dash, open_tab):
     fresh.notice("Explode")
     bystander.set("Controls", "Explode")
     bystander.notice("Explode")
+
+
+def test_malformed_frames_are_dropped_with_one_log_line_per_kind_and_second(dash, open_tab, caplog):
+    """A tab sending frames that do not decode keeps its connection and its controls: each bad frame
+    is dropped, and the log gets at most one line per kind of fault per second."""
+    garbage = (b"\xc1 not msgpack", msgspec.msgpack.encode({"type": "NoSuchMessage"}),
+               msgspec.msgpack.encode({"type": "GuiUpdateMessage"}), msgspec.msgpack.encode([1, 2, 3]))
+    tab = open_tab()
+    with caplog.at_level(logging.WARNING, logger="app.viser_hooks"):
+        started = time.monotonic()
+        for _ in range(200):
+            for frame in garbage:
+                tab.ws.send(frame)
+        tab.ws.send("a text frame")
+        tab.set("Controls", "Explode")
+        tab.notice("Explode")  # the same connection still works
+        seconds = time.monotonic() - started
+    dropped = [r for r in caplog.records if "dropped a frame a page sent" in r.getMessage()]
+    kinds = {r.getMessage().split(": ")[2] for r in dropped}
+    assert dropped and "Traceback" not in caplog.text
+    assert len(dropped) <= len(kinds) * (math.ceil(seconds) + 1), [r.getMessage() for r in dropped]
+
+
+def test_a_click_at_a_finite_but_huge_point_is_outside_the_map(dash, open_tab):
+    _reset(dash)
+    tab = open_tab()
+    tab.click_map([1e308, -1e308, 5.0], [0.0, 0.0, -1.0])
+    tab.notice("that click is outside the map")
