@@ -9,6 +9,20 @@ import time
 from l3mvn.errors import L3MVNError, one_line
 
 
+def _typed(kind: type, flag: str):
+    """An argparse type reading ``flag`` as ``--set`` reads numbers (ASCII digits, finite)."""
+    from l3mvn.config import number
+
+    def parse(raw: str):
+        try:
+            return number(raw, kind, flag)
+        except L3MVNError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"{flag} ")) from None
+
+    parse.__name__ = kind.__name__  # argparse names the type in its message
+    return parse
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from app.origin import ALLOW_ORIGIN_FLAG
     from l3mvn.registry import POLICY_NAMES
@@ -17,9 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenes", default=None, metavar="DIR",
                         help="scan root of a habitat ObjectNav --dataset (e.g. data/scene_datasets)")
     parser.add_argument("--split", default="val", help="split name inside --dataset (default: val)")
-    parser.add_argument("--houses", type=int, default=3, help="procedural houses when no --dataset (default 3)")
-    parser.add_argument("--episodes-per-house", type=int, default=5, help="procedural episodes per house (default 5)")
-    parser.add_argument("--seed", type=int, default=0, help="seed for procedural houses, episodes and policies")
+    parser.add_argument("--houses", type=_typed(int, "--houses"), default=3, help="procedural houses when no --dataset (default 3)")
+    parser.add_argument("--episodes-per-house", type=_typed(int, "--episodes-per-house"), default=5, help="procedural episodes per house (default 5)")
+    parser.add_argument("--seed", type=_typed(int, "--seed"), default=0, help="seed for procedural houses, episodes and policies")
     parser.add_argument("--policy", choices=POLICY_NAMES, default="oracle" if "l3mvn-zs" not in POLICY_NAMES
                         else "l3mvn-zs", help="policy selected when the page opens (changeable in the page)")
     parser.add_argument("--host", default="127.0.0.1",
@@ -28,10 +42,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also accept pages served from ORIGIN (scheme://host[:port], e.g. a reverse "
                              "proxy's https://studio.example.com); repeatable. By default only "
                              "http://127.0.0.1:PORT, http://localhost:PORT and http://HOST:PORT may connect")
-    parser.add_argument("--port", type=int, default=8080, help="port (default 8080)")
+    parser.add_argument("--port", type=_typed(int, "--port"), default=8080, help="port (default 8080)")
     parser.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
                         help="override any config field, as for `l3mvn eval` (`l3mvn config` lists them)")
-    parser.add_argument("--speed", type=float, default=4.0, help="steps per second while running (default 4)")
+    parser.add_argument("--speed", type=_typed(float, "--speed"), default=4.0, help="steps per second while running (default 4)")
     parser.add_argument("--record", action="store_true", help="record each episode to recordings/*.rrd")
     parser.add_argument("--record-dir", default=None, metavar="DIR",
                         help="where --record and the Results panel's re-runs write (default: recordings/ for "
@@ -51,12 +65,14 @@ def run(args: argparse.Namespace) -> int:
     """
     from app.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS
     from app.server import start_dashboard
+    from app.session_worker import check_speed
     from l3mvn.config import Config, TaskConfig, override
     from l3mvn.datasets.objectnav import dataset_rule
     from l3mvn.serving import interrupt_on_stop_signals
 
     with interrupt_on_stop_signals():
         try:
+            check_speed(args.speed)
             # The dataset's own success rule (HM3D / MP3D view points, else SemExp's), as `l3mvn eval` takes it.
             cfg = Config(task=TaskConfig(success_rule=dataset_rule(args.dataset, args.split)))
             dash = start_dashboard(cfg=override(cfg, args.set), dataset=args.dataset, split=args.split,

@@ -578,6 +578,15 @@ def _outcome(event: StepEvent) -> str:
     return f"episode {event.episode_key}: {verdict}, SPL {float(r.get('spl', 0.0)):.2f}, {r.get('steps')} steps"
 
 
+def check_speed(value: float) -> float:
+    """``serve --speed``: a value out of range is refused, never clamped (a user who asked for 100
+    steps per second must not silently get 60)."""
+    if not (isinstance(value, Real) and not isinstance(value, bool) and MIN_SPEED <= value <= MAX_SPEED):
+        raise L3MVNError(f"--speed must be a number of steps per second from {MIN_SPEED:g} to {MAX_SPEED:g}, "
+                         f"got {value!r}")
+    return float(value)
+
+
 def _clamp_speed(value: float) -> float:
     """``value`` within [MIN_SPEED, MAX_SPEED]; not a finite number is refused (Run waits 1 / speed)."""
     if not isinstance(value, Real) or isinstance(value, bool) or not math.isfinite(value):

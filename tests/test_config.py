@@ -39,7 +39,10 @@ def test_set_is_typed_and_a_unique_field_needs_no_section():
     ("zzz.a=1", "unknown config section 'zzz'.*sections: sim, task, map, frontiers, planner, agent, policy"),
     ("obstacle_dilation_cells=2", "in several sections: write frontiers.obstacle_dilation_cells or "
                                   "planner.obstacle_dilation_cells"),
-    ("sim.max_steps=ten", "sim.max_steps expects a int, got 'ten'"),
+    ("sim.max_steps=ten", "sim.max_steps expects an int, got 'ten'"),
+    ("sim.max_steps=٣٠", "sim.max_steps expects an int in ASCII digits, got '٣٠'"),
+    ("map.resolution_m=0.0005", "is a 96000x96000-cell map, about 1.7 TiB per episode; this machine has"),
+    ("planner.clearance_cells=1000000", "planner.clearance_cells is 1000000 cells, more than the whole 960-cell map"),
     ("task.success_distance_m=nan", "expects a finite number"),
     ("sim.max_depth_m=inf", "expects a finite number"),
     ("map.resolution_m=0", "resolution_m must be positive"),
@@ -95,3 +98,22 @@ def test_counts_and_distances_out_of_range_are_one_line_errors_naming_the_field(
     with pytest.raises(L3MVNError) as err:
         override(Config(), [setting])
     assert setting.split(".")[1].split("=")[0] in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--speed", "-1"], "error: --speed must be a number of steps per second from 0.5 to 60, got -1.0"),
+    (["--speed", "nan"], "argument --speed: expects a finite number, got 'nan'"),
+    (["--speed", "٣"], "argument --speed: expects a float in ASCII digits, got '٣'"),
+    (["--port", "٨٠٨٠"], "argument --port: expects an int in ASCII digits, got '٨٠٨٠'"),
+    (["--set", "sim.max_steps=٣٠"], "error: setting sim.max_steps expects an int in ASCII digits"),
+])
+def test_serve_flags_follow_the_rules_of_set(argv, message, capsys):
+    """Refused before anything is served: one line, status 2, never a clamped or misread value."""
+    from app.cli import main as serve_cli
+
+    try:
+        code = serve_cli(["serve", *argv])
+    except SystemExit as stop:  # argparse's own refusal
+        code = stop.code
+    err = capsys.readouterr().err
+    assert code == 2 and message in err, err

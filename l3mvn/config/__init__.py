@@ -13,6 +13,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import os
 import typing
 from dataclasses import dataclass, field
 from typing import Any
@@ -51,6 +52,14 @@ class Config:
                              "goal and back forever")
         if self.sim.agent_radius_m < self.map.resolution_m / 2:
             raise L3MVNError("sim.agent_radius_m must be at least half a map cell (map.resolution_m / 2)")
+        cells = self.map.map_cells
+        for section in (self.planner, self.frontiers, self.agent):
+            for f in dataclasses.fields(section):
+                if f.name.endswith("_cells") and getattr(section, f.name) > cells:
+                    name = f"{type(section).__name__.removesuffix('Config').lower()}.{f.name}"
+                    raise L3MVNError(f"{name} is {getattr(section, f.name)} cells, more than the whole "
+                                     f"{cells}-cell map (map.map_size_m / map.resolution_m)")
+        _check_memory(self)
 
     def replace(self, **sections: Any) -> "Config":
         return dataclasses.replace(self, **sections)
@@ -60,6 +69,41 @@ class Config:
 
 
 SECTIONS = tuple(f.name for f in dataclasses.fields(Config))
+
+# Upper bounds of what one episode holds per map cell (the map's layers, the planner's distance
+# fields in float64 and their masks) and per camera pixel (RGB, depth, labels and their points).
+MAP_BYTES_PER_CELL = 200
+FRAME_BYTES_PER_PIXEL = 64
+
+
+def machine_memory_bytes() -> int:
+    """This machine's physical memory (a large stand-in where the OS does not say)."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 1 << 50
+
+
+def _check_memory(cfg: Config) -> None:
+    """Refuse a tree whose map or frames could not fit in this machine's memory: it would fail every
+    episode, after the run started, with a MemoryError asking for terabytes."""
+    cells, have = cfg.map.map_cells, machine_memory_bytes()
+    need_map = cells * cells * MAP_BYTES_PER_CELL
+    need_frame = cfg.sim.frame_height * cfg.sim.frame_width * FRAME_BYTES_PER_PIXEL
+    if need_map > have:
+        raise L3MVNError(f"map.map_size_m {cfg.map.map_size_m:g} at map.resolution_m {cfg.map.resolution_m:g} is a "
+                         f"{cells}x{cells}-cell map, about {_size(need_map)} per episode; this machine has "
+                         f"{_size(have)}: choose a coarser resolution_m or a smaller map_size_m")
+    if need_frame > have:
+        raise L3MVNError(f"a {cfg.sim.frame_height}x{cfg.sim.frame_width} frame needs about {_size(need_frame)}; "
+                         f"this machine has {_size(have)}: choose a smaller sim.frame_height / frame_width")
+
+
+def _size(nbytes: float) -> str:
+    for unit, scale in (("TiB", 1 << 40), ("GiB", 1 << 30), ("MiB", 1 << 20)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.1f} {unit}"
+    return f"{nbytes / 1024:.0f} KiB"
 
 
 def config_dict(cfg: Config) -> dict[str, Any]:
@@ -123,16 +167,31 @@ def _parse(section_cfg: Any, key: str, raw: str, where: str) -> Any:
             return None
         raise L3MVNError(f"setting {where} cannot be none")
     base = options[0]
+    if base in (int, float):
+        return number(raw, base, f"setting {where}")
     try:
         if base is bool:
             if raw.lower() not in ("true", "false", "1", "0"):
                 raise ValueError(raw)
             return raw.lower() in ("true", "1")
-        value = base(raw)
+        return base(raw)
     except (TypeError, ValueError):
         raise L3MVNError(f"setting {where} expects a {base.__name__}, got {raw!r}") from None
+
+
+def number(raw: str, kind: type, where: str) -> int | float:
+    """``raw`` as a finite ``kind`` (int or float) written in ASCII (Python also reads other scripts'
+    digits, which a user who typed them cannot have meant for a config), else a one-line L3MVNError
+    starting with ``where``."""
+    article = "an" if kind is int else "a"
+    if not raw.isascii():
+        raise L3MVNError(f"{where} expects {article} {kind.__name__} in ASCII digits, got {raw!r}")
+    try:
+        value = kind(raw)
+    except (TypeError, ValueError, OverflowError):
+        raise L3MVNError(f"{where} expects {article} {kind.__name__}, got {raw!r}") from None
     if isinstance(value, float) and not math.isfinite(value):
-        raise L3MVNError(f"setting {where} expects a finite number, got {raw!r}")
+        raise L3MVNError(f"{where} expects a finite number, got {raw!r}")
     return value
 
 
