@@ -28,6 +28,11 @@ class OraclePolicy:
 
     name = "oracle"
     lookahead_cells = 8
+    # Where the greedy walk stalls this near the region, the way in is searched over the motion model
+    # itself: a region a few cells wide (habitat's 0.1 m around a single view point) can lie between
+    # the poses that 0.25 m steps and 30-degree turns reach greedily.
+    search_radius_m = 1.5
+    search_states = 30_000
     stuck = False  # it reads the true distance field: never stuck by its own account
 
     def __init__(self, env: BuiltinSimulator, task: ObjectNavTask) -> None:
@@ -35,12 +40,14 @@ class OraclePolicy:
         self._goal = ""
         self._fields: dict[str, np.ndarray] = {}
         self._field: np.ndarray | None = None
+        self._plan: list[Action] = []  # the searched way into the region, popped from the end
 
     def reset(self, episode: Episode) -> None:
         self.change_target(episode.goal)
 
     def change_target(self, goal: str) -> None:
         """Walk to ``goal`` from here on (episode start, or the dashboard's mid-episode change)."""
+        self._plan = []
         if goal not in self._fields:
             scene = self.env.scene
             region = self.task.region(goal).region & scene.walkable
@@ -65,6 +72,12 @@ class OraclePolicy:
                 best_k, best_v = k, v
         if not math.isfinite(here):
             return Action.STOP  # no path from here to the goal: walking cannot help
+        if self._plan:
+            return self._plan.pop()
+        if best_v >= here and here <= self.search_radius_m:
+            self._plan = self._search_into_region(pose)
+            if self._plan:
+                return self._plan.pop()
         if best_v >= here:
             # No single move helps (a corner tighter than one step): turn towards the path ahead.
             r, c = scene.cell_of(pose.x, pose.y)
@@ -74,6 +87,47 @@ class OraclePolicy:
         if best_k == 0:
             return Action.MOVE_FORWARD
         return Action.TURN_LEFT if best_k > 0 else Action.TURN_RIGHT
+
+    def _search_into_region(self, start: Pose) -> list[Action]:
+        """The shortest action sequence (breadth first over the simulator's own forward move and
+        turns) from ``start`` to a pose inside the success region, reversed for popping; [] when
+        none lies within ``search_radius_m`` and ``search_states``. A state is a map cell and a
+        heading: the region is judged by cell, so reaching a cell at all is reaching it."""
+        scene, turn = self.env.scene, self.env.cfg.turn_angle_rad
+        n = max(1, round(2 * math.pi / turn))
+        origin = scene.cell_of(start.x, start.y)
+        reach = self.search_radius_m / scene.resolution_m + 1
+
+        def key(pose: Pose, k: int) -> tuple[int, int, int]:
+            return (*scene.cell_of(pose.x, pose.y), k % n)
+
+        came: dict[tuple[int, int, int], tuple[tuple[int, int, int] | None, Action | None]] = {key(start, 0): (None, None)}
+        frontier = [(start, 0)]
+        while frontier and len(came) < self.search_states:
+            following = []
+            for pose, k in frontier:
+                here = key(pose, k)
+                moves = ((Action.MOVE_FORWARD, self.env.forward_result(pose)[0], k),
+                         (Action.TURN_LEFT, Pose(pose.x, pose.y, pose.heading + turn), k + 1),
+                         (Action.TURN_RIGHT, Pose(pose.x, pose.y, pose.heading - turn), k - 1))
+                for action, nxt, j in moves:
+                    state = key(nxt, j)
+                    if state in came or math.dist(state[:2], origin) > reach:
+                        continue
+                    came[state] = (here, action)
+                    if self.task.in_success_region(nxt, self._goal):
+                        return self._actions_to(state, came)
+                    following.append((nxt, j))
+            frontier = following
+        return []
+
+    @staticmethod
+    def _actions_to(state, came) -> list[Action]:
+        actions = []
+        while came[state][0] is not None:
+            state, action = came[state]
+            actions.append(action)
+        return actions  # last action first: popped from the end
 
     def _descend(self, r: int, c: int) -> tuple[int, int]:
         """The cell ``lookahead_cells`` steps down the distance field from (r, c), following the
