@@ -9,6 +9,7 @@ from them exists, while their text is on the page as typed. Skips like the other
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -92,7 +93,7 @@ def test_markup_from_result_files_and_recordings_stays_text(dash, tmp_path):
         page.wait_for_timeout(1000)  # an onerror or a srcdoc frame would have run by now
         text = _panel_text(page)
         traces = _traces(page)
-        page.screenshot(path=str(tmp_path / "markup.png"), full_page=True)
+        page.screenshot(path=str(Path(os.environ.get("L3MVN_SCREENSHOTS", tmp_path)) / "dashboard_markup.png"))
         browser.close()
 
     assert traces == {"xss": None, "marked": 0, "frames": 0, "scripts": 0, "links": 0, "title": title}, traces
