@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import stat
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -67,14 +66,7 @@ def list_result_files(folder: str | Path) -> list[Path]:
     p = Path(folder)
     if not p.is_dir():
         return []
-    found = []
-    for path in p.glob("*.jsonl"):
-        try:
-            if stat.S_ISREG(path.lstat().st_mode) or (path.is_symlink() and path.is_file()):
-                found.append(path)
-        except OSError:  # removed while listing, or a name the filesystem refuses
-            continue
-    return sorted(found)
+    return sorted(path for path in p.glob("*.jsonl") if path.is_file())
 
 
 def load_result_file(path: str | Path) -> ResultFile:

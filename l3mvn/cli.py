@@ -377,7 +377,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from l3mvn.eval.backends import run_local
     from l3mvn.eval.job import EvalJob, is_error_row
     from l3mvn.eval.metrics import format_summary, summarize
-    from l3mvn.eval.results import ResultWriter, check_resumable, row_problem
+    from l3mvn.eval.results import ResultWriter, check_resumable, json_safe, row_problem
     from l3mvn.writing import make_folder
 
     if args.address and args.backend != "ray":
@@ -465,7 +465,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     print(f"dataset: {eset.name}/{eset.split}, format {eset.format}")
     print(format_summary(summary))
     if args.json:
-        print(json.dumps(_json_safe(summary), sort_keys=True))
+        print(json.dumps(json_safe(summary), sort_keys=True))
     if unwritten and not interrupted:
         raise L3MVNError(f"{len(unwritten)} recordings or videos were not written whole, the results are kept "
                          f"(first: {unwritten[0]})")
@@ -488,16 +488,6 @@ def _progress(total: int):
     from tqdm import tqdm
 
     return tqdm(total=total, unit="ep", file=sys.stderr, dynamic_ncols=True, mininterval=1.0)
-
-
-def _json_safe(obj):
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_json_safe(v) for v in obj]
-    return obj
 
 
 def _cmd_language(args: argparse.Namespace) -> int:

@@ -109,6 +109,7 @@ def test_eval_recording_to_a_full_disk_keeps_the_results_and_exits_2(full, tmp_p
     done = _eval_recorded(out, full / "rec")
     _results_kept(out, done)
     assert "KiB free on its disk" in done.stderr
+    assert _left(full) == []  # no empty recording left to be listed
 
 
 def test_a_recording_cut_short_by_the_disk_is_named_and_the_run_exits_2(tmp_path):
@@ -121,7 +122,9 @@ def test_a_recording_cut_short_by_the_disk_is_named_and_the_run_exits_2(tmp_path
     out = tmp_path / "r.jsonl"
     done = _eval_recorded(out, tmp_path / "rec", preexec_fn=limited)
     _results_kept(out, done)
-    assert "(is the disk full?)" in done.stderr
+    assert "(is the disk full?); kept as " in done.stderr
+    assert list((tmp_path / "rec").glob("*.rrd")) == []  # nothing cut is offered as a recording
+    assert len(list((tmp_path / "rec").glob("*.rrd.partial"))) == 2
 
 
 def test_eval_video_to_a_full_disk_exits_2(full, tmp_path):

@@ -34,6 +34,7 @@ from scipy import ndimage as ndi
 from l3mvn.agent.target import TargetSearch
 from l3mvn.config import Config
 from l3mvn.errors import L3MVNError
+from l3mvn.eval.results import json_safe
 from l3mvn.task.regions import footprint_region
 from l3mvn.mapping import CameraIntrinsics, SemanticMapper
 from l3mvn.mapping.projection import depth_to_points, downsample_frame
@@ -164,7 +165,7 @@ class AuditReport:
         return {r: counts[r] for r in REASONS}
 
     def to_json(self) -> dict:
-        return _json_safe({
+        return json_safe({
             "source": self.source, "split": self.split, "rule": self.rule, "frame": list(self.frame),
             "seconds": round(self.seconds, 2), "reasons": REASONS,
             "counts": {"instances": len(self.instances),
@@ -643,16 +644,6 @@ def _r(v: float | None) -> float | None:
 
 def _fmt(v: float | None) -> str:
     return "-" if v is None else f"{v:.2f}"
-
-
-def _json_safe(obj):
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    return obj
 
 
 __all__ = [

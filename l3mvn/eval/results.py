@@ -122,17 +122,19 @@ def encode_row(row: dict) -> bytes:
     try:
         text = json.dumps(row, sort_keys=True, allow_nan=False)
     except ValueError:
-        text = json.dumps(_finite(row), sort_keys=True, allow_nan=False)
+        text = json.dumps(json_safe(row), sort_keys=True, allow_nan=False)
     return (text + "\n").encode()
 
 
-def _finite(value: Any) -> Any:
+def json_safe(value: Any) -> Any:
+    """``value`` with NaN and infinities as None, so that strict JSON can hold it (result lines, the
+    summary ``--json`` prints, the audit report)."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
+        return {k: json_safe(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
+        return [json_safe(v) for v in value]
     return value
 
 

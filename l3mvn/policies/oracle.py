@@ -102,10 +102,10 @@ class OraclePolicy:
             return (*scene.cell_of(pose.x, pose.y), k % n)
 
         came: dict[tuple[int, int, int], tuple[tuple[int, int, int] | None, Action | None]] = {key(start, 0): (None, None)}
-        frontier = [(start, 0)]
-        while frontier and len(came) < self.search_states:
+        layer = [(start, 0)]
+        while layer and len(came) < self.search_states:
             following = []
-            for pose, k in frontier:
+            for pose, k in layer:
                 here = key(pose, k)
                 moves = ((Action.MOVE_FORWARD, self.env.forward_result(pose)[0], k),
                          (Action.TURN_LEFT, Pose(pose.x, pose.y, pose.heading + turn), k + 1),
@@ -118,7 +118,7 @@ class OraclePolicy:
                     if self.task.in_success_region(nxt, self._goal):
                         return self._actions_to(state, came)
                     following.append((nxt, j))
-            frontier = following
+            layer = following
         return []
 
     @staticmethod

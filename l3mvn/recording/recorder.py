@@ -53,12 +53,16 @@ class Recorder:
                  application_id: str = APPLICATION_ID) -> None:
         self.path = Path(path)
         self.meta = {"dataset": str(dataset), "scene": scene, "episode_id": int(episode_id), "policy": policy}
+        _check_room(self.path)
+        existed = self.path.exists()
         self._held = hold_exclusively(self.path)
         self._rec = rr.RecordingStream(application_id, send_properties=True)
         try:
             _start_file(self._rec, self.path)
         except L3MVNError:
             os.close(self._held)
+            if not existed:  # no empty or header-only .rrd left behind to be listed as a recording
+                self.path.unlink(missing_ok=True)
             raise
         self._rec.send_recording_name(f"{Path(str(dataset)).name} {scene} #{episode_id} {policy}")
         self._lock = threading.Lock()
@@ -115,12 +119,21 @@ class Recorder:
         return self._failure
 
     def _check_on_disk(self) -> str | None:
+        """None when the whole recording is on disk; else why not, the file renamed ``*.rrd.partial``
+        so that no listing offers it as a recording (what it holds stays readable)."""
         try:
             os.fsync(self._held)  # a full disk or a quota often reports only here
+            gap = recording_gap(self.path)
         except OSError as exc:
-            return f"recording {self.path} did not reach the disk: {exc.strerror or exc}"
-        gap = recording_gap(self.path)
-        return None if gap is None else f"recording {self.path} {gap} (is the disk full?)"
+            gap = f"did not reach the disk: {exc.strerror or exc}"
+        if gap is None:
+            return None
+        partial = self.path.with_name(self.path.name + ".partial")
+        try:
+            os.replace(self.path, partial)
+        except OSError:
+            partial = self.path
+        return f"recording {self.path} {gap} (is the disk full?); kept as {partial.name}"
 
     def __call__(self, event: StepEvent) -> None:
         with self._lock:
@@ -492,22 +505,29 @@ def _start_file(rec: rr.RecordingStream, path: Path) -> None:
         raise L3MVNError(f"cannot write recording {path}: {first_line(failed[0])}")
 
 
-def hold_exclusively(path: Path) -> int:
-    """Open ``path`` (creating it and its folder, changing no byte) under an exclusive ``flock`` and
-    return the descriptor that holds it. A second writer of the same path, in this process or
-    another, is refused before it could truncate or interleave with the first; the kernel drops the
-    lock with the holder, however it exits."""
+def _check_room(path: Path) -> None:
+    """Refuse to start a recording on a disk with less than ``MIN_FREE_BYTES`` free (creating its
+    folder): rerun's file writer can block for ever on a disk with no room to start."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         disk = os.statvfs(path.parent)
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_CLOEXEC, 0o644)
     except OSError as exc:
         raise L3MVNError(f"cannot write recording {path}: {exc.strerror or exc}") from None
     free = disk.f_bavail * disk.f_frsize
-    if free < MIN_FREE_BYTES:  # rerun's file writer can block for ever on a disk with no room to start
-        os.close(fd)
+    if free < MIN_FREE_BYTES:
         raise L3MVNError(f"cannot write recording {path}: only {free >> 10} KiB free on its disk (a recording "
                          f"needs a few MiB; {MIN_FREE_BYTES >> 20} MiB are asked for)")
+
+
+def hold_exclusively(path: Path) -> int:
+    """Open ``path`` (creating it, changing no byte) under an exclusive ``flock`` and return the
+    descriptor that holds it. A second writer of the same path, in this process or another, is
+    refused before it could truncate or interleave with the first; the kernel drops the lock with
+    the holder, however it exits."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        raise L3MVNError(f"cannot write recording {path}: {exc.strerror or exc}") from None
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError as exc:
