@@ -6,12 +6,12 @@ import argparse
 import sys
 import time
 
-from l3mvn.errors import L3MVNError, one_line
+from l3mvn.core.errors import L3MVNError, one_line
 
 
 def _typed(kind: type, flag: str):
     """An argparse type reading ``flag`` as ``--set`` reads numbers (ASCII digits, finite)."""
-    from l3mvn.config import number
+    from l3mvn.core.config import number
 
     def parse(raw: str):
         try:
@@ -24,8 +24,8 @@ def _typed(kind: type, flag: str):
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from app.origin import ALLOW_ORIGIN_FLAG
-    from l3mvn.registry import POLICY_NAMES
+    from l3mvn_studio.origin import ALLOW_ORIGIN_FLAG
+    from l3mvn.run.registry import POLICY_NAMES
 
     parser.add_argument("--dataset", default=None, help="SemExp-format dataset directory (default: procedural houses)")
     parser.add_argument("--scenes", default=None, metavar="DIR",
@@ -63,12 +63,12 @@ def run(args: argparse.Namespace) -> int:
     A bad flag, host or port, or a port in use, is one line on stderr and status 2, before anything
     is served.
     """
-    from app.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS
-    from app.server import start_dashboard
-    from app.session_worker import check_speed
-    from l3mvn.config import Config, TaskConfig, override
-    from l3mvn.datasets.objectnav import dataset_rule
-    from l3mvn.serving import interrupt_on_stop_signals
+    from l3mvn_studio.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS
+    from l3mvn_studio.server import start_dashboard
+    from l3mvn_studio.session_worker import check_speed
+    from l3mvn.core.config import Config, TaskConfig, override
+    from l3mvn.world.datasets.objectnav import dataset_rule
+    from l3mvn.run.serving import interrupt_on_stop_signals
 
     with interrupt_on_stop_signals():
         try:
@@ -119,8 +119,8 @@ def serve_main(argv: list[str] | None = None) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """The installed ``l3mvn`` script: the library's commands and the dashboard's ``serve``."""
-    from l3mvn.cli import Command
-    from l3mvn.cli import main as l3mvn_main
+    from l3mvn.run.cli import Command
+    from l3mvn.run.cli import main as l3mvn_main
 
     return l3mvn_main(argv, extra={"serve": Command("the live web dashboard (viser)", add_arguments, run)})
 

@@ -21,15 +21,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from app.map_image import png_bytes, png_rgb
-from l3mvn.config import Config
-from l3mvn.errors import L3MVNError, first_line
-from l3mvn.eval.job import EvalJob
-from l3mvn.recording.catalogue import recording_path, unique_tag
-from l3mvn.recording.video import (
+from l3mvn_studio.map_image import png_bytes, png_rgb
+from l3mvn.core.config import Config
+from l3mvn.core.errors import L3MVNError, first_line
+from l3mvn.run.eval.job import EvalJob
+from l3mvn.run.recording.catalogue import recording_path, unique_tag
+from l3mvn.run.recording.video import (
     FONT, PANEL_BG, TEXT_RGB, RecordedEpisode, VideoOptions, fit_text, frames, read_episode,
 )
-from l3mvn.registry import ALIASES, DIRECT_POLICIES, POLICY_NAMES, TELEOP
+from l3mvn.run.registry import ALIASES, DIRECT_POLICIES, POLICY_NAMES, TELEOP
 
 PICTURE_HEIGHT = 400  # pixels of a side's map panel: the map is what is compared, so it leads
 CAMERA_SCALE = 0.6  # the camera frame under it, at this share of the map panel's height

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app.compare import (
+from l3mvn_studio.compare import (
     EXCLUDED,
     Comparison,
     Contender,
@@ -30,12 +30,12 @@ from app.compare import (
     run_comparison,
     side_folder,
 )
-from app.map_image import png_bytes
-from app.page_text import html, md
-from app.results import EpisodeRow, recording_of, rerun
-from l3mvn.config import Config
-from l3mvn.errors import L3MVNError, first_line
-from l3mvn.types import Episode
+from l3mvn_studio.map_image import png_bytes
+from l3mvn_studio.page_text import html, md
+from l3mvn_studio.results import EpisodeRow, recording_of, rerun
+from l3mvn.core.config import Config
+from l3mvn.core.errors import L3MVNError, first_line
+from l3mvn.world.episode import Episode
 
 log = logging.getLogger(__name__)
 

@@ -17,11 +17,11 @@ import cv2
 import numpy as np
 import viser
 
-from app.compare_view import main_view_html
-from app.map_image import png_bytes, png_rgb, score_color
-from app.page_text import md
-from app.state import MapView, Snapshot
-from l3mvn.errors import L3MVNError
+from l3mvn_studio.compare_view import main_view_html
+from l3mvn_studio.map_image import png_bytes, png_rgb, score_color
+from l3mvn_studio.page_text import md
+from l3mvn_studio.state import MapView, Snapshot
+from l3mvn.core.errors import L3MVNError
 
 MAX_KEPT = 2000  # steps of one episode kept (~30 KB each); an episode is 500 by default
 _AGENT = (220, 40, 40)

@@ -3,17 +3,17 @@
 For the chosen frontier and the best few others: the scorer's p(goal | frontier) for every goal as
 bars in the map's category colours (the target ringed and named, as in the legend), the sentence the
 model read, a distance head's expected metres to each goal, and the fusion rule of the choice with the
-numbers it compared (``l3mvn.frontiers.Fusion.describe``). Pure functions of the snapshot's records:
+numbers it compared (``l3mvn.agent.frontiers.Fusion.describe``). Pure functions of the snapshot's records:
 the view only assigns the string.
 """
 
 from __future__ import annotations
 
-from app.page_text import html
-from app.state import FrontierMarker, MapView
-from l3mvn.frontiers import Fusion
-from l3mvn.registry import ALIASES, LANGUAGE_POLICIES
-from l3mvn.viz import category_color
+from l3mvn_studio.page_text import html
+from l3mvn_studio.state import FrontierMarker, MapView
+from l3mvn.agent.frontiers import Fusion
+from l3mvn.run.registry import ALIASES, LANGUAGE_POLICIES
+from l3mvn.run.viz import category_color
 
 SHOWN_FRONTIERS = 4  # the chosen frontier and the best others by fused score
 BAR_PX = 130  # the width of p = 1

@@ -12,11 +12,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from app.state import Cell, FrontierMarker, MapView
-from l3mvn.events import Decision
-from l3mvn.scenes.scene import SceneMap
-from l3mvn.types import Pose
-from l3mvn.viz import COLLISION_RGB, category_palette, legend
+from l3mvn_studio.state import Cell, FrontierMarker, MapView
+from l3mvn.agent.decision import Decision
+from l3mvn.world.scenes.scene import SceneMap
+from l3mvn.core.types import Pose
+from l3mvn.run.viz import COLLISION_RGB, category_palette, legend
 
 UNEXPLORED = (28, 30, 36)
 FREE = (226, 226, 220)

@@ -23,8 +23,8 @@ import threading
 from typing import Iterable
 from urllib.parse import urlsplit
 
-from app.client_input import shown
-from l3mvn.errors import L3MVNError
+from l3mvn_studio.client_input import shown
+from l3mvn.core.errors import L3MVNError
 
 log = logging.getLogger(__name__)
 

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import viser
 
-from app.page_text import code
-from l3mvn.errors import L3MVNError
-from l3mvn.recording import list_recordings
-from l3mvn.recording.replay import WebViewer, start_web_viewer
+from l3mvn_studio.page_text import code
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.recording import list_recordings
+from l3mvn.run.recording.replay import WebViewer, start_web_viewer
 
 log = logging.getLogger(__name__)
 

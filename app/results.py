@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from app.map_image import png_bytes
-from l3mvn.config import Config
-from l3mvn.errors import L3MVNError, first_line
-from l3mvn.eval.job import EvalJob
-from l3mvn.eval.results import episode_lines
-from l3mvn.recording.catalogue import find_recording, recording_path, unique_tag
-from l3mvn.recording.video import VideoOptions, frames, read_episode
+from l3mvn_studio.map_image import png_bytes
+from l3mvn.core.config import Config
+from l3mvn.core.errors import L3MVNError, first_line
+from l3mvn.run.eval.job import EvalJob
+from l3mvn.run.eval.results import episode_lines
+from l3mvn.run.recording.catalogue import find_recording, recording_path, unique_tag
+from l3mvn.run.recording.video import VideoOptions, frames, read_episode
 
 ALL, FAILURES, SUCCESSES = "all", "failures", "successes"
 SORT_KEYS = ("row", "scene", "goal", "success", "spl", "dtg", "steps", "failure", "coverage")

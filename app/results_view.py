@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import viser
 
-from app.compare_view import ComparePanel, main_view_html
-from app.map_image import png_rgb
-from app.page_text import code, html, md
-from app.results import (
+from l3mvn_studio.compare_view import ComparePanel, main_view_html
+from l3mvn_studio.map_image import png_rgb
+from l3mvn_studio.page_text import code, html, md
+from l3mvn_studio.results import (
     ALL,
     SORT_KEYS,
     EpisodeRow,
@@ -36,7 +36,7 @@ from app.results import (
     solved_by_one,
     summaries,
 )
-from l3mvn.errors import L3MVNError
+from l3mvn.core.errors import L3MVNError
 
 log = logging.getLogger(__name__)
 

@@ -9,17 +9,17 @@ from typing import Iterable
 
 import viser
 
-from app.compare import EpisodeSource
-from app.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS, OriginPolicy
-from app.results_view import ResultsSource
-from app.session_worker import DashboardController
-from app.views import DashboardView
-from app.viser_hooks import start_checked_server
-from l3mvn.config import Config
-from l3mvn.datasets import load_episode_set
-from l3mvn.errors import L3MVNError
-from l3mvn.recording.catalogue import DEFAULT_RECORD_DIR
-from l3mvn.serving import check_listen_address
+from l3mvn_studio.compare import EpisodeSource
+from l3mvn_studio.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS, OriginPolicy
+from l3mvn_studio.results_view import ResultsSource
+from l3mvn_studio.session_worker import DashboardController
+from l3mvn_studio.views import DashboardView
+from l3mvn_studio.viser_hooks import start_checked_server
+from l3mvn.core.config import Config
+from l3mvn.world.datasets import load_episode_set
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.recording.catalogue import DEFAULT_RECORD_DIR
+from l3mvn.run.serving import check_listen_address
 
 log = logging.getLogger(__name__)
 

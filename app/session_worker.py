@@ -21,24 +21,25 @@ from numbers import Real
 from pathlib import Path
 from typing import Callable
 
-from app.map_image import agent_map_view, ground_truth_view
-from app.model_weights import scorer_problems
-from app.state import Cell, Frames, Metrics, Notice, Snapshot
-from l3mvn.config import Config, config_hash
-from l3mvn.config.policy import DEFAULT_HEAD, HEAD_KINDS, HEAD_SCORER
-from l3mvn.datasets import EpisodeSet
-from l3mvn.errors import L3MVNError
-from l3mvn.events import EventBus, StepEvent
-from l3mvn.recording.catalogue import DEFAULT_RECORD_DIR, unique_tag
-from l3mvn.agent.teleop import TeleopAgent
-from l3mvn.registry import (
+from l3mvn_studio.map_image import agent_map_view, ground_truth_view
+from l3mvn_studio.model_weights import scorer_problems
+from l3mvn_studio.state import Cell, Frames, Metrics, Notice, Snapshot
+from l3mvn.core.config import Config, config_hash
+from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS, HEAD_SCORER
+from l3mvn.world.datasets import EpisodeSet
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.events import EventBus, StepEvent
+from l3mvn.run.recording.catalogue import DEFAULT_RECORD_DIR, unique_tag
+from l3mvn.agent.modular.teleop import TeleopAgent
+from l3mvn.run.registry import (
     ALIASES, DIRECT_POLICIES, LANGUAGE_POLICIES, POLICY_NAMES, TELEOP, check_policy,
 )
-from l3mvn.scenes.scene import GOAL_CATEGORIES
-from l3mvn.runner import Runner
-from l3mvn.session import EpisodeSession, Steerable
-from l3mvn.types import Action, Episode, Pose
-from l3mvn.viz import colorize_depth, colorize_semantic
+from l3mvn.core.categories import GOAL_CATEGORIES
+from l3mvn.run.runner import Runner
+from l3mvn.run.session import EpisodeSession, Steerable
+from l3mvn.core.types import Action, Pose
+from l3mvn.world.episode import Episode
+from l3mvn.run.viz import colorize_depth, colorize_semantic
 
 log = logging.getLogger(__name__)
 
@@ -118,8 +119,8 @@ class DashboardController:
 
     @staticmethod
     def scorer_names() -> tuple[str, ...]:
-        """Scorers offered by ``l3mvn.language``."""
-        from l3mvn.language import scorer_names
+        """Scorers offered by ``l3mvn.agent.language``."""
+        from l3mvn.agent.language import scorer_names
 
         return tuple(scorer_names())
 
@@ -479,7 +480,7 @@ class DashboardController:
     def _start_recorder(self, episode: Episode) -> None:
         """A recording of this run of ``episode`` under a name of its own: the session may run an
         episode many times, and the folder may hold an eval's recording of it (never replaced)."""
-        from l3mvn.recording import Recorder
+        from l3mvn.run.recording import Recorder
 
         recorder = Recorder.for_episode(self.record_dir, self.episodes.name, episode, self.policy_name,
                                         unique_tag("live")).attach(self.bus)

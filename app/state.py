@@ -10,8 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from l3mvn.events import StepEvent
-from l3mvn.frontiers import Fusion
+from l3mvn.run.events import StepEvent
+from l3mvn.agent.frontiers import Fusion
 
 Cell = tuple[int, int]
 

@@ -24,23 +24,23 @@ import cv2
 import numpy as np
 import viser
 
-from app.client_input import ray_refusal, update_refusal
-from app.compare_view import ComparePanel, EpisodeSource
-from app.language_panel import language_html
-from app.history_view import HistoryPanel
-from app.page_text import code, html, md
-from app.map_image import GT_FLOOR, GT_GOAL, GT_REGION, ground_truth_layer, score_color
-from app.recordings_view import RecordingsPanel
-from app.results_view import ResultsPanel, ResultsSource
-from app.session_worker import DEFAULT_SCORER, FRAME_WIDTH, MAX_SPEED, MIN_SPEED, DashboardController
-from app.state import Cell, FrontierMarker, MapView, Notice, Snapshot
-from app.viser_hooks import (
+from l3mvn_studio.client_input import ray_refusal, update_refusal
+from l3mvn_studio.compare_view import ComparePanel, EpisodeSource
+from l3mvn_studio.language_panel import language_html
+from l3mvn_studio.history_view import HistoryPanel
+from l3mvn_studio.page_text import code, html, md
+from l3mvn_studio.map_image import GT_FLOOR, GT_GOAL, GT_REGION, ground_truth_layer, score_color
+from l3mvn_studio.recordings_view import RecordingsPanel
+from l3mvn_studio.results_view import ResultsPanel, ResultsSource
+from l3mvn_studio.session_worker import DEFAULT_SCORER, FRAME_WIDTH, MAX_SPEED, MIN_SPEED, DashboardController
+from l3mvn_studio.state import Cell, FrontierMarker, MapView, Notice, Snapshot
+from l3mvn_studio.viser_hooks import (
     check_gui_updates, handle_uuid, ignore_client_messages_except, run_script_on_connect, show_value_to,
 )
-from l3mvn.errors import L3MVNError
-from l3mvn.registry import DIRECT_POLICIES, POLICY_NAMES, TELEOP
-from l3mvn.scenes.scene import GOAL_CATEGORIES
-from l3mvn.viz import COLLISION_RGB, legend
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.registry import DIRECT_POLICIES, POLICY_NAMES, TELEOP
+from l3mvn.core.categories import GOAL_CATEGORIES
+from l3mvn.run.viz import COLLISION_RGB, legend
 
 log = logging.getLogger(__name__)
 
@@ -837,7 +837,7 @@ def _swatch(rgb, *, ring: bool = False) -> str:
 def _legend_html(categories, *, target: str = "", ground_truth: bool = False) -> str:
     """Map colours, then the object categories the map shows, the target first and ringed as on
     the map; the ground-truth layer's colours when it is on; then the frontier score colour bar."""
-    from app.map_image import FREE, GLIMPSED, GUESSED, OBSTACLE, TRAJECTORY, UNEXPLORED
+    from l3mvn_studio.map_image import FREE, GLIMPSED, GUESSED, OBSTACLE, TRAJECTORY, UNEXPLORED
 
     fixed = [("unexplored", UNEXPLORED), ("free", FREE), ("seen from afar", GLIMPSED), ("obstacle", OBSTACLE),
              ("obstacle too near for depth (guessed)", GUESSED), ("collision marks", COLLISION_RGB),

@@ -22,8 +22,8 @@ from viser._messages import GuiUpdateMessage, RunJavascriptMessage
 from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
 
-from l3mvn.errors import L3MVNError
-from l3mvn.serving import bind_failure
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.serving import bind_failure
 
 log = logging.getLogger(__name__)
 

@@ -24,8 +24,8 @@ import time
 
 from playwright.sync_api import sync_playwright
 
-from app.server import start_dashboard
-from l3mvn.config import Config
+from l3mvn_studio.server import start_dashboard
+from l3mvn.core.config import Config
 
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]

@@ -33,13 +33,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from l3mvn.config import Config, PolicyConfig  # noqa: E402
-from l3mvn.datasets import load_episode_set  # noqa: E402
-from l3mvn.language import GOALS  # noqa: E402
-from l3mvn.language.frontier_head import house_split  # noqa: E402
-from l3mvn.registry import make_policy  # noqa: E402
-from l3mvn.policies.oracle import frontier_goal_distances  # noqa: E402
-from l3mvn.runner import Runner  # noqa: E402
+from l3mvn.core.config import Config, PolicyConfig  # noqa: E402
+from l3mvn.world.datasets import load_episode_set  # noqa: E402
+from l3mvn.agent.language import GOALS  # noqa: E402
+from l3mvn.agent.language.frontier_head import house_split  # noqa: E402
+from l3mvn.run.registry import make_policy  # noqa: E402
+from l3mvn.agent.policies.oracle_frontier import frontier_goal_distances  # noqa: E402
+from l3mvn.run.runner import Runner  # noqa: E402
 
 # (label, policy name, options): the paper's policies and its Table II ablations.
 CANDIDATES = [
@@ -82,7 +82,7 @@ def _episode(args: tuple[str | None, str, int, str]) -> list[tuple[str, str, flo
         if not frontiers or len(frontiers) < 2 or frontiers is last or decision.goal_kind != "frontier":
             continue
         last = frontiers
-        total = np.array([f.cost for f in frontiers]) + frontier_goal_distances(frontiers, decision.map, region)
+        total = np.array([f.cost for f in frontiers]) + frontier_goal_distances(frontiers, decision.map, region.distances_at)
         if not np.isfinite(total).any():
             continue
         best = total.min()

@@ -2,7 +2,7 @@
 
     python bench/bench_habitat_vs_ours.py EXPORT_DIR [--habitat-python PY] [--habitat-export DIR] [--frames DIR]
 
-EXPORT_DIR is a scan dataset in HM3D's layout (``l3mvn.datasets.hm3d_export``). Per episode: success,
+EXPORT_DIR is a scan dataset in HM3D's layout (``l3mvn.world.datasets.hm3d_export``). Per episode: success,
 SPL and path length on both simulators, habitat's pathfinder geodesic against the episode file's,
 and how the first frames agree (depth error, semantic labels). ``--habitat-export`` gives habitat a
 copy of the export with other files (e.g. re-encoded semantic meshes); ``--frames`` writes the first
@@ -18,15 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from l3mvn.config import Config, SimConfig, TaskConfig
-from l3mvn.datasets import load_episode_set
-from l3mvn.datasets.objectnav import dataset_rule
-from l3mvn.registry import make_policy
-from l3mvn.runner import Runner
-from l3mvn.scenes.categories import RAW_NAMES
-from l3mvn.session import EpisodeSession
-from l3mvn.sim.habitat_bridge import habitat_environment
-from l3mvn.task import ObjectNavTask
+from l3mvn.core.config import Config, SimConfig, TaskConfig
+from l3mvn.world.datasets import load_episode_set
+from l3mvn.world.datasets.objectnav import dataset_rule
+from l3mvn.run.registry import make_policy
+from l3mvn.run.runner import Runner
+from l3mvn.world.scenes.categories import RAW_NAMES
+from l3mvn.run.session import EpisodeSession
+from l3mvn.world.sim.habitat_bridge import habitat_environment
+from l3mvn.world.task import ObjectNavTask
 
 SPLIT = "val"
 

@@ -70,7 +70,7 @@ def main() -> int:
     port = _port()
     log = Path(f"/tmp/l3mvn-hostile-{port}.log")
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
-    server = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--policy", "frontier",
+    server = subprocess.Popen([sys.executable, "-m", "l3mvn_studio.cli", "serve", "--port", str(port), "--policy", "frontier",
                                "--houses", "1", "--episodes-per-house", "2", "--speed", "20"],
                               cwd=REPO, env=env, stdout=log.open("w"), stderr=subprocess.STDOUT)
     try:

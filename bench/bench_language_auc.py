@@ -23,8 +23,8 @@ from scipy.stats import rankdata
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from l3mvn.errors import L3MVNError  # noqa: E402
-from l3mvn.language import GOALS, Room, load_rooms, load_stats, make_scorer, rooms_in  # noqa: E402
+from l3mvn.core.errors import L3MVNError  # noqa: E402
+from l3mvn.agent.language import GOALS, Room, load_rooms, load_stats, make_scorer, rooms_in  # noqa: E402
 
 
 def auc(scores: np.ndarray, positive: np.ndarray) -> float:

@@ -16,11 +16,11 @@ import time
 import numpy as np
 import torch
 
-from l3mvn.config import Config
-from l3mvn.datasets import load_episode_set
-from l3mvn.events import EventBus
-from l3mvn.policies.language_policy import shared_scorer
-from l3mvn.runner import Runner
+from l3mvn.core.config import Config
+from l3mvn.world.datasets import load_episode_set
+from l3mvn.run.events import EventBus
+from l3mvn.agent.policies.language_policy import shared_scorer
+from l3mvn.run.runner import Runner
 
 
 def run(policy: str, eset, cfg: Config, episodes) -> dict:

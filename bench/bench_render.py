@@ -15,13 +15,15 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage as ndi
 
-from l3mvn.config import SimConfig
-from l3mvn.grid import disk
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
-from l3mvn.sim.render import Renderer
-from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.types import Action, Episode, Pose
-from l3mvn.sim.world import build_world
+from l3mvn.core.config import SimConfig
+from l3mvn.core.grid import disk
+from l3mvn.core.categories import GIBSON_CATEGORIES
+from l3mvn.world.scenes.scene import SceneMap
+from l3mvn.world.sim.render import Renderer
+from l3mvn.world.sim.simulator import BuiltinSimulator
+from l3mvn.core.types import Action, Pose
+from l3mvn.world.episode import Episode
+from l3mvn.world.sim.world import build_world
 
 SIZES = ((120, 160), (480, 640))
 DEFAULT_SCENES = ("Allensville", "Lakeville", "Lindenwood", "Wainscott")
@@ -55,7 +57,7 @@ def synthetic_house() -> SceneMap:
 def load_scenes(dataset: Path | None, split: str, names: tuple[str, ...]) -> list[SceneMap]:
     if dataset is None or not (dataset / split / f"{split}_info.pbz2").exists():
         return [synthetic_house()]
-    from l3mvn.scenes.semexp import load_split
+    from l3mvn.world.scenes.semexp import load_split
 
     scenes = load_split(dataset, split)
     chosen = [n for n in names if n in scenes] or sorted(scenes)[:4]

@@ -20,10 +20,10 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from l3mvn.config import Config
-from l3mvn.errors import L3MVNError
-from l3mvn.eval.backends import run_local
-from l3mvn.eval.job import EvalJob, is_error_row
+from l3mvn.core.config import Config
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.eval.backends import run_local
+from l3mvn.run.eval.job import EvalJob, is_error_row
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -67,7 +67,7 @@ class Run:
 def measure(job: EvalJob, keys: list[str], backend: str, workers: int) -> Run:
     t0 = time.perf_counter()
     if backend == "ray":
-        from l3mvn.eval.ray_backend import run_ray
+        from l3mvn.run.eval.ray_backend import run_ray
 
         rows_iter = run_ray(job, keys, address=None, num_workers=workers)
     else:
@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
     with contextlib.ExitStack() as stack:
         if "ray" in backends:
             try:
-                from l3mvn.eval.ray_backend import private_ray
+                from l3mvn.run.eval.ray_backend import private_ray
 
                 stack.enter_context(private_ray(max(args.workers)))
             except L3MVNError as exc:

@@ -4,7 +4,7 @@
     python bench/failure_causes.py AUDIT_DIR/audit.json RESULTS.jsonl [RESULTS.jsonl ...]
 
 Prints one column per results file: SR, then the number of failures in each class of
-``l3mvn.task.failures.CLASSES`` (world: lost floor / object unreachable / hidden; agent: never
+``l3mvn.world.task.failures.CLASSES`` (world: lost floor / object unreachable / hidden; agent: never
 looked / glimpsed, not confirmed / confirmed, not reached / stuck / false stop / in region, no stop).
 """
 
@@ -17,9 +17,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from l3mvn.errors import L3MVNError  # noqa: E402
-from l3mvn.eval.results import episode_lines  # noqa: E402
-from l3mvn.task.failures import CLASSES, failure_table  # noqa: E402
+from l3mvn.core.errors import L3MVNError  # noqa: E402
+from l3mvn.run.eval.results import episode_lines  # noqa: E402
+from l3mvn.world.task.failures import CLASSES, failure_table  # noqa: E402
 
 
 def usable_rows(path: Path) -> tuple[list[dict], int]:

@@ -2,7 +2,7 @@
 # Build a headless CPU habitat-sim 0.2.2 into a cache OUTSIDE the repository, following
 # ../shared/tools/habitat_cpu/README.md (CPython 3.13 from Debian's sources, a glibc 2.38 shim,
 # the prebuilt Magnum bindings, numpy 2's CopyInto slot). A verification aid for the habitat
-# backend (`l3mvn.sim.habitat_bridge`): users bring their own habitat-sim from conda.
+# backend (`l3mvn.world.sim.habitat_bridge`): users bring their own habitat-sim from conda.
 #
 # Usage: scripts/build_habitat_cpu.sh [CACHE] ; afterwards CACHE/python is an interpreter that
 # imports habitat_sim (it sets HSIM_DISABLE_CUDA_DEVICE=1), the path to give --habitat-python.

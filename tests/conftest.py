@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from l3mvn.grid import disk
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
+from l3mvn.core.grid import disk
+from l3mvn.core.categories import GIBSON_CATEGORIES
+from l3mvn.world.scenes.scene import SceneMap
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
@@ -55,8 +56,8 @@ def tiny_scene() -> SceneMap:
 @pytest.fixture
 def tiny_dataset(tmp_path: Path) -> Path:
     """A SemExp-format dataset directory with one split 'val' holding two tiny houses + episodes."""
-    from l3mvn.episodes import episode_file, generate_episodes, write_episode_file
-    from l3mvn.scenes.semexp import save_split
+    from l3mvn.world.episodes import episode_file, generate_episodes, write_episode_file
+    from l3mvn.world.scenes.semexp import save_split
 
     scenes = [draw_two_room_house("Tiny"), draw_two_room_house("Wee", height=130, width=210)]
     save_split(tmp_path, "val", scenes)
@@ -70,8 +71,8 @@ def tiny_dataset(tmp_path: Path) -> Path:
 def shut_dataset(tmp_path: Path) -> Path:
     """The two-room house with its door walled up after episodes were drawn: of its 6 episodes, the
     ones starting in the room without their goal (ids 0-4) have no path; id 5 starts beside it."""
-    from l3mvn.episodes import episode_file, generate_episodes, write_episode_file
-    from l3mvn.scenes.semexp import save_split
+    from l3mvn.world.episodes import episode_file, generate_episodes, write_episode_file
+    from l3mvn.world.scenes.semexp import save_split
 
     house = draw_two_room_house("Shut")
     episodes = generate_episodes(house, 6, seed=1, goals=("toilet", "bed"))
@@ -98,7 +99,7 @@ def free_port() -> int:
 def serve_dashboard(**options):
     """A dashboard on one procedural house and a free loopback port, stopped when the fixture that
     yields from this ends: ``yield from serve_dashboard(policy=..., ...)``."""
-    from app.server import start_dashboard
+    from l3mvn_studio.server import start_dashboard
 
     d = start_dashboard(port=free_port(), houses=1, **options)
     try:
@@ -110,7 +111,7 @@ def serve_dashboard(**options):
 def write_frontier_file(folder: Path, houses=("Allensville", "Coffeen", "Hiteman"), choices: int = 12) -> Path:
     """A small `language frontier-data` file: in every house a frontier whose window holds a sink lies
     nearer the toilet than one that sees a couch (each episode closed by its "done" line)."""
-    from l3mvn.language.vocabulary import GOALS
+    from l3mvn.agent.language.vocabulary import GOALS
 
     rng = np.random.default_rng(0)
     lines = []
@@ -132,9 +133,10 @@ def write_frontier_file(folder: Path, houses=("Allensville", "Coffeen", "Hiteman
 
 def first_frontier_choice(scene: SceneMap, policy: str = "l3mvn-zs"):
     """The Decision of ``policy``'s first frontier choice on ``scene`` (toilet, 60x80 frames)."""
-    from l3mvn.config import Config
-    from l3mvn.runner import Runner
-    from l3mvn.types import Episode, Pose
+    from l3mvn.core.config import Config
+    from l3mvn.run.runner import Runner
+    from l3mvn.core.types import Pose
+    from l3mvn.world.episode import Episode
 
     session = Runner(Config().with_frame(60, 80)).session(scene, policy)
     session.start(Episode(episode_id=0, scene=scene.name, floor=0, start=Pose(2.5, 2.0, 0.0), goal="toilet"))

@@ -12,15 +12,16 @@ import math
 import numpy as np
 import pytest
 
-from l3mvn.agent import MapAgent
-from l3mvn.config import AgentConfig, Config, SimConfig, TaskConfig
-from l3mvn.errors import L3MVNError
-from l3mvn.mapping import SemanticMap
-from l3mvn.policies.global_policies import NearestFrontier
-from l3mvn.session import EpisodeSession
-from l3mvn.task import ObjectNavTask
-from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.types import Action, Episode, Pose
+from l3mvn.agent.modular import MapAgent
+from l3mvn.core.config import AgentConfig, Config, SimConfig, TaskConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.agent.mapping import SemanticMap
+from l3mvn.agent.policies.global_policies import NearestFrontier
+from l3mvn.run.session import EpisodeSession
+from l3mvn.world.task import ObjectNavTask
+from l3mvn.world.sim.simulator import BuiltinSimulator
+from l3mvn.core.types import Action, Pose
+from l3mvn.world.episode import Episode
 
 MAX_STEPS = 300
 START = Pose(x=2.5, y=2.0, heading=math.pi)  # west room, facing away from the door
@@ -171,7 +172,7 @@ def test_reached_frontiers_are_not_chosen_again(env):
 
 
 def test_random_sample_keeps_its_goal_until_reached_while_frontier_policies_reselect(env):
-    from l3mvn.policies.global_policies import RandomSample
+    from l3mvn.agent.policies.global_policies import RandomSample
 
     tree = _tree(env)
     agent = MapAgent(RandomSample(tree.planner.obstacle_dilation_cells), env.categories, tree)
@@ -268,7 +269,7 @@ def test_a_target_the_agent_cannot_get_closer_to_is_stopped_at_within_the_succes
 def test_a_stuck_agent_escapes_under_its_own_goal_kind(env):
     """Stuck while exploring: the marks go, a random turn then two steps forward, each decision
     labelled ``GoalKind.ESCAPE`` (a plain string there broke consumers that read the kind's name)."""
-    from l3mvn.events import GoalKind
+    from l3mvn.agent.decision import GoalKind
 
     agent = _agent(env, look_around_steps=0)
     episode = _episode("toilet")
@@ -295,12 +296,12 @@ def test_stop_distances_are_checked_against_each_other_and_the_success_distance(
 
 
 def test_frontier_oracle_heads_for_the_frontier_nearest_the_goal_and_succeeds(env):
-    from l3mvn.policies.oracle import FrontierOracle
+    from l3mvn.agent.policies.oracle_frontier import FrontierOracle
 
-    from l3mvn.policies.oracle import object_distances
+    from l3mvn.world.baselines import ObjectDistances, object_distances
 
     task = ObjectNavTask(env.scene, _tree(env))
-    oracle = FrontierOracle(task)
+    oracle = FrontierOracle(ObjectDistances(task))
     result, events = _run(env, MapAgent(oracle, env.categories, _tree(env)), _episode())
     assert result.success, result.failure
     region = object_distances(task, "toilet")
@@ -323,7 +324,7 @@ def test_frontier_oracle_heads_for_the_frontier_nearest_the_goal_and_succeeds(en
 def test_the_frontier_oracle_measures_to_the_object_not_through_the_wall_to_its_success_region():
     # The side room's toilet against its south wall: its SemExp success region reaches through the
     # wall into the corridor, but from there the toilet is farther round by the door.
-    from l3mvn.policies.oracle import object_distances
+    from l3mvn.world.baselines import object_distances
 
     scene = _corridor_with_side_room(toilet=(slice(28, 36), slice(112, 119)))
     task = ObjectNavTask(scene, Config(sim=SimConfig().with_frame(60, 80)))
@@ -337,8 +338,8 @@ def _corridor_with_side_room(toilet=(slice(10, 20), slice(82, 92))):
     toilet stands in the corner beside the door: seen from the corridor only through the doorway."""
     from scipy import ndimage as ndi
 
-    from l3mvn.grid import disk
-    from l3mvn.scenes.scene import SceneMap
+    from l3mvn.core.grid import disk
+    from l3mvn.world.scenes.scene import SceneMap
 
     h, w = 80, 200
     nav = np.zeros((h, w), bool)
@@ -430,10 +431,10 @@ def test_looking_settings_are_checked_with_one_line_errors(env):
 def test_a_kept_frontier_names_why_it_was_chosen_once_not_once_per_keep():
     """The dashboard showed "kept frontier 1 (commitment): kept frontier 1 (commitment): ..." after
     two re-selections: the kept reason quoted the previous kept reason."""
-    from l3mvn.agent.exploration import ExplorationGoals
-    from l3mvn.frontiers import Frontier
-    from l3mvn.planning import LocalPlanner
-    from l3mvn.policies.global_policies import Selection
+    from l3mvn.agent.modular.exploration import ExplorationGoals
+    from l3mvn.agent.frontiers import Frontier
+    from l3mvn.agent.planning import LocalPlanner
+    from l3mvn.agent.policies.global_policies import Selection
 
     config = Config()
     goals = ExplorationGoals(NearestFrontier(), config, LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim))
@@ -453,9 +454,9 @@ def test_a_frontier_too_near_for_a_new_list_is_looked_beyond_before_the_timer_ch
     within 0.5 m of its frontier, before the plan could read it as reached. The new list left that
     frontier out (nearer than ``min_distance_m``), the agent walked 6 m to another, found the first
     one nearest again and went back: 400 steps back and forth."""
-    from l3mvn.agent.exploration import ExplorationGoals
-    from l3mvn.events import GoalKind
-    from l3mvn.planning import LocalPlanner
+    from l3mvn.agent.modular.exploration import ExplorationGoals
+    from l3mvn.agent.decision import GoalKind
+    from l3mvn.agent.planning import LocalPlanner
 
     config = Config()
     n = 200
@@ -489,9 +490,9 @@ def test_with_no_other_frontier_left_the_edge_beside_guessed_obstacles_is_one():
     had no frontier left, and the agent drew unreachable random cells for 75 steps. Guesses are the
     weakest evidence on the map: once nothing else is left unknown, the edge beside them is a
     frontier (the planner still walks round them)."""
-    from l3mvn.agent.exploration import ExplorationGoals
-    from l3mvn.events import GoalKind
-    from l3mvn.planning import LocalPlanner
+    from l3mvn.agent.modular.exploration import ExplorationGoals
+    from l3mvn.agent.decision import GoalKind
+    from l3mvn.agent.planning import LocalPlanner
 
     config = Config()
     n = 200

@@ -10,13 +10,14 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from l3mvn.cli import main
-from l3mvn.config import Config
-from l3mvn.eval.audit import REASONS, AuditConfig, FloorAuditor, audit_floor, audit_split
-from l3mvn.task.regions import footprint_region, goal_region
-from l3mvn.grid import disk
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
-from l3mvn.sim.world import World, build_world
+from l3mvn.run.cli import main
+from l3mvn.core.config import Config
+from l3mvn.run.eval.audit import REASONS, AuditConfig, FloorAuditor, audit_floor, audit_split
+from l3mvn.world.task.regions import footprint_region, goal_region
+from l3mvn.core.grid import disk
+from l3mvn.core.categories import GIBSON_CATEGORIES
+from l3mvn.world.scenes.scene import SceneMap
+from l3mvn.world.sim.world import World, build_world
 
 from conftest import draw_two_room_house
 

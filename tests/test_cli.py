@@ -7,7 +7,7 @@ import sys
 import pytest
 from PIL import Image
 
-from l3mvn.cli import main
+from l3mvn.run.cli import main
 
 
 def test_eval_oracle_on_a_dataset_prints_a_json_summary_last(tiny_dataset, tmp_path, capsys):
@@ -60,7 +60,7 @@ def test_unknown_split_names_the_available_ones(tiny_dataset, capsys):
 
 
 def test_bad_flag_value_is_rejected_by_the_parser_without_traceback():
-    proc = subprocess.run([sys.executable, "-m", "l3mvn.cli", "eval", "--policy", "teleport"],
+    proc = subprocess.run([sys.executable, "-m", "l3mvn.run.cli", "eval", "--policy", "teleport"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2 and "invalid choice: 'teleport'" in proc.stderr
     assert "Traceback" not in proc.stderr
@@ -88,7 +88,7 @@ def test_generated_procedural_episodes_form_a_semexp_dataset(tmp_path, capsys):
 
 
 def test_an_interrupted_eval_still_summarises_what_finished(tiny_dataset, tmp_path, capsys, monkeypatch):
-    import l3mvn.eval.backends as backends
+    import l3mvn.run.eval.backends as backends
 
     real = backends.run_local
 

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from app.compare import (
+from l3mvn_studio.compare import (
     PICTURE_HEIGHT,
     Contender,
     EpisodeSource,
@@ -19,8 +19,8 @@ from app.compare import (
     parse_decision,
     run_comparison,
 )
-from l3mvn.config import Config
-from l3mvn.errors import L3MVNError
+from l3mvn.core.config import Config
+from l3mvn.core.errors import L3MVNError
 
 SOURCE = EpisodeSource(None, "val", houses=1, episodes_per_house=2, seed=0)
 KEY = "procedural-0000/0/0"

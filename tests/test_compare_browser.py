@@ -28,10 +28,10 @@ from test_dashboard_browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_tex
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
                                                          "`playwright install chromium` runs these tests")
 
-from app.compare import compare_recordings
-from app.results import recording_of
-from app.server import start_dashboard
-from l3mvn.config import Config
+from l3mvn_studio.compare import compare_recordings
+from l3mvn_studio.results import recording_of
+from l3mvn_studio.server import start_dashboard
+from l3mvn.core.config import Config
 
 
 @pytest.fixture(scope="module")
@@ -140,7 +140,7 @@ def results_dash(tmp_path_factory):
     d = tmp_path_factory.mktemp("results")
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
     for policy in ("frontier", "cost-utility"):
-        subprocess.run([sys.executable, "-m", "app.cli", "eval", "--policy", policy, "--houses", "1",
+        subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", "eval", "--policy", policy, "--houses", "1",
                         "--episodes-per-house", "2", "--frame", "120x160", "--set", "sim.max_steps=40",
                         "--out", str(d / f"{policy}.jsonl"), "--record", "--record-dir", str(d / "rec")],
                        check=True, capture_output=True, env=env, timeout=600)

@@ -4,8 +4,8 @@ import dataclasses
 
 import pytest
 
-from l3mvn.config import SECTIONS, AgentConfig, Config, SimConfig, TaskConfig, config_dict, config_hash, override, settings
-from l3mvn.errors import L3MVNError
+from l3mvn.core.config import SECTIONS, AgentConfig, Config, SimConfig, TaskConfig, config_dict, config_hash, override, settings
+from l3mvn.core.errors import L3MVNError
 
 
 def test_every_field_of_every_section_changes_the_hash():
@@ -109,7 +109,7 @@ def test_counts_and_distances_out_of_range_are_one_line_errors_naming_the_field(
 ])
 def test_serve_flags_follow_the_rules_of_set(argv, message, capsys):
     """Refused before anything is served: one line, status 2, never a clamped or misread value."""
-    from app.cli import main as serve_cli
+    from l3mvn_studio.cli import main as serve_cli
 
     try:
         code = serve_cli(["serve", *argv])

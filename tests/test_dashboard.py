@@ -9,12 +9,12 @@ import time
 import pytest
 
 from conftest import serve_dashboard
-from app.page_text import md
-from app.state import Notice
-from app.views import cell_to_xy, ray_to_cell
-from l3mvn.config import Config, SimConfig
-from l3mvn.errors import L3MVNError
-from l3mvn.events import StepEvent
+from l3mvn_studio.page_text import md
+from l3mvn_studio.state import Notice
+from l3mvn_studio.views import cell_to_xy, ray_to_cell
+from l3mvn.core.config import Config, SimConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.events import StepEvent
 
 SMALL = Config(sim=SimConfig().with_frame(120, 160))
 
@@ -147,8 +147,8 @@ def test_manual_goal_on_a_policy_without_one_says_so(ctl):
 
 
 def test_manual_goal_before_any_episode_or_after_the_end_is_refused(dash):
-    from app.session_worker import DashboardController
-    from l3mvn.datasets import load_episode_set
+    from l3mvn_studio.session_worker import DashboardController
+    from l3mvn.world.datasets import load_episode_set
 
     fresh = DashboardController(load_episode_set(None, "val", houses=1, episodes_per_house=1, cfg=SMALL), SMALL)
     try:

@@ -25,10 +25,10 @@ from test_dashboard_browser import (  # noqa: E402  (after the skip: it needs pl
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
                                                          "`playwright install chromium` runs these tests")
 
-from app.model_weights import scorer_problems  # noqa: E402
-from app.server import start_dashboard  # noqa: E402
-from app.views import NOTICE_SECONDS  # noqa: E402
-from l3mvn.config import Config  # noqa: E402
+from l3mvn_studio.model_weights import scorer_problems  # noqa: E402
+from l3mvn_studio.server import start_dashboard  # noqa: E402
+from l3mvn_studio.views import NOTICE_SECONDS  # noqa: E402
+from l3mvn.core.config import Config  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -10,11 +10,11 @@ import dataclasses
 import pytest
 
 from conftest import serve_dashboard
-from app.session_worker import DEFAULT_HEAD_CHOICE, DashboardController
-from l3mvn.config import Config, PolicyConfig, SimConfig, config_hash
-from l3mvn.config.policy import HEAD_KINDS
-from l3mvn.datasets import load_episode_set
-from l3mvn.errors import L3MVNError
+from l3mvn_studio.session_worker import DEFAULT_HEAD_CHOICE, DashboardController
+from l3mvn.core.config import Config, PolicyConfig, SimConfig, config_hash
+from l3mvn.core.config.policy import HEAD_KINDS
+from l3mvn.world.datasets import load_episode_set
+from l3mvn.core.errors import L3MVNError
 
 SMALL = Config(sim=SimConfig().with_frame(60, 80))
 BAG = SMALL.replace(policy=PolicyConfig(head="frontiers-bag"))

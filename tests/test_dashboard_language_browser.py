@@ -22,8 +22,8 @@ from test_dashboard_browser import (  # noqa: E402  (after the skip: it needs pl
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
                                                          "`playwright install chromium` runs these tests")
 
-from app.language_panel import BAR_PX, SHOWN_FRONTIERS  # noqa: E402
-from l3mvn.config import Config  # noqa: E402
+from l3mvn_studio.language_panel import BAR_PX, SHOWN_FRONTIERS  # noqa: E402
+from l3mvn.core.config import Config  # noqa: E402
 
 MAX_CLICKS = 40  # the look-around takes 12 steps; episode 0 of house 0 (toilet) chooses at step 13
 

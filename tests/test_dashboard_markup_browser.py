@@ -22,7 +22,7 @@ from test_dashboard_browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_tex
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
                                                          "`playwright install chromium` runs these tests")
 
-from app.server import start_dashboard
+from l3mvn_studio.server import start_dashboard
 
 # Each would leave a trace if it ran or became an element: window.__xss, an element marked data-xss,
 # a javascript: link, a dialog or a changed title.

@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 
 from conftest import free_port
-from app.map_image import png_rgb
-from app.page_text import md
-from app.results import (
+from l3mvn_studio.map_image import png_rgb
+from l3mvn_studio.page_text import md
+from l3mvn_studio.results import (
     FAILURES,
     filter_choices,
     list_result_files,
@@ -28,8 +28,8 @@ from app.results import (
     solved_by_one,
     summaries,
 )
-from l3mvn.errors import L3MVNError
-from l3mvn.recording import read_recording
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.recording import read_recording
 
 HOUSES, PER_HOUSE, SEED = 1, 3, 0
 EVAL = ["--houses", str(HOUSES), "--episodes-per-house", str(PER_HOUSE), "--seed", str(SEED),
@@ -38,7 +38,7 @@ EVAL = ["--houses", str(HOUSES), "--episodes-per-house", str(PER_HOUSE), "--seed
 
 def _eval(out: Path, policy: str, *extra: str) -> None:
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
-    subprocess.run([sys.executable, "-m", "app.cli", "eval", "--policy", policy, *EVAL, "--out", str(out), *extra],
+    subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", "eval", "--policy", policy, *EVAL, "--out", str(out), *extra],
                    check=True, capture_output=True, env=env, timeout=600)
 
 
@@ -131,7 +131,7 @@ def test_rerun_with_the_stored_config_and_seed_gives_the_stored_result(evaluated
 def test_three_tabs_rerunning_one_episode_leave_every_recording_readable(evaluated, tmp_path):
     """Re-runs record beside the eval's recordings (reruns/), each in a file of its own; the eval's
     recordings stay byte for byte as they were, even with three re-runs of one line at once."""
-    from app.server import start_dashboard
+    from l3mvn_studio.server import start_dashboard
 
     shutil.copytree(evaluated / "rec", tmp_path / "rec")
     before = {p.name: p.read_bytes() for p in (tmp_path / "rec").iterdir()}
@@ -170,7 +170,7 @@ def test_three_tabs_rerunning_one_episode_leave_every_recording_readable(evaluat
 
 
 def test_the_panel_starts_on_a_folder_whose_first_file_is_not_results(evaluated, tmp_path):
-    from app.server import start_dashboard
+    from l3mvn_studio.server import start_dashboard
 
     (tmp_path / "a_notes.jsonl").write_text("not results\n")
     (tmp_path / "b.jsonl").write_text((evaluated / "frontier.jsonl").read_text())
@@ -193,8 +193,8 @@ def test_hostile_files_in_the_results_folder_neither_crash_nor_hang_the_dashboar
     """A FIFO named like a result file is not offered (reading it would block forever); a file whose
     lines hold bad episode ids, NaN, a line nested 200,000 deep and one longer than the line limit
     opens with each of those lines named as a problem."""
-    from app.server import start_dashboard
-    from l3mvn.eval.results import MAX_LINE_BYTES
+    from l3mvn_studio.server import start_dashboard
+    from l3mvn.run.eval.results import MAX_LINE_BYTES
 
     os.mkfifo(tmp_path / "a.jsonl")
     good = (evaluated / "frontier.jsonl").read_text().splitlines()

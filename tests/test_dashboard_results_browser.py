@@ -29,9 +29,9 @@ from test_dashboard_browser import (
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
                                                          "`playwright install chromium` runs these tests")
 
-from app.map_image import png_rgb
-from app.results import load_result_file, recording_frames, recording_of
-from app.server import start_dashboard
+from l3mvn_studio.map_image import png_rgb
+from l3mvn_studio.results import load_result_file, recording_frames, recording_of
+from l3mvn_studio.server import start_dashboard
 
 HOUSES, PER_HOUSE = 4, 5
 
@@ -40,7 +40,7 @@ HOUSES, PER_HOUSE = 4, 5
 def dash(tmp_path_factory):
     d = tmp_path_factory.mktemp("served")
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
-    subprocess.run([sys.executable, "-m", "app.cli", "eval", "--policy", "frontier", "--houses", str(HOUSES),
+    subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", "eval", "--policy", "frontier", "--houses", str(HOUSES),
                     "--episodes-per-house", str(PER_HOUSE), "--frame", "60x80", "--set", "sim.max_steps=40",
                     "--out", str(d / "frontier.jsonl"), "--record", "--record-dir", str(d / "rec")],
                    check=True, capture_output=True, env=env, timeout=900)

@@ -15,11 +15,11 @@ pytest.importorskip("trimesh")
 pytest.importorskip("embreex")
 
 from conftest import free_port
-from app.cli import add_arguments, run  # noqa: E402
-from app.server import start_dashboard  # noqa: E402
-from l3mvn.config import Config, TaskConfig  # noqa: E402
-from l3mvn.datasets.hm3d_export import export_hm3d  # noqa: E402
-from l3mvn.recording import read_recording  # noqa: E402
+from l3mvn_studio.cli import add_arguments, run  # noqa: E402
+from l3mvn_studio.server import start_dashboard  # noqa: E402
+from l3mvn.core.config import Config, TaskConfig  # noqa: E402
+from l3mvn.world.datasets.hm3d_export import export_hm3d  # noqa: E402
+from l3mvn.run.recording import read_recording  # noqa: E402
 
 HM3D = Config(task=TaskConfig(success_rule="hm3d")).with_frame(120, 160)
 

@@ -19,12 +19,12 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
 from conftest import free_port, serve_dashboard
-from app.cli import serve_main
-from app.origin import OriginPolicy
-from app.server import start_dashboard
-from app.viser_hooks import start_checked_server
-from l3mvn.config import Config, SimConfig
-from l3mvn.errors import L3MVNError
+from l3mvn_studio.cli import serve_main
+from l3mvn_studio.origin import OriginPolicy
+from l3mvn_studio.server import start_dashboard
+from l3mvn_studio.viser_hooks import start_checked_server
+from l3mvn.core.config import Config, SimConfig
+from l3mvn.core.errors import L3MVNError
 
 SMALL = Config(sim=SimConfig().with_frame(120, 160))
 DEFAULT_SPEED = 4.0  # start_dashboard's steps per second
@@ -376,7 +376,7 @@ def test_a_handler_that_raises_is_logged_and_becomes_an_error_notice_to_its_tab(
         raise RuntimeError("step fell over")
 
     monkeypatch.setattr(dash.controller, "step", broken_step)
-    with caplog.at_level(logging.ERROR, logger="app.views"):
+    with caplog.at_level(logging.ERROR, logger="l3mvn_studio.views"):
         tab.set("Controls", "Step")
         notice = tab.notice("Controls failed: RuntimeError: step fell over")
     assert notice["title"] == "Error" and notice["color"] == "red"
@@ -408,7 +408,7 @@ def test_malformed_frames_are_dropped_with_one_log_line_per_kind_and_second(dash
     garbage = (b"\xc1 not msgpack", msgspec.msgpack.encode({"type": "NoSuchMessage"}),
                msgspec.msgpack.encode({"type": "GuiUpdateMessage"}), msgspec.msgpack.encode([1, 2, 3]))
     tab = open_tab()
-    with caplog.at_level(logging.WARNING, logger="app.viser_hooks"):
+    with caplog.at_level(logging.WARNING, logger="l3mvn_studio.viser_hooks"):
         started = time.monotonic()
         for _ in range(200):
             for frame in garbage:

@@ -13,18 +13,18 @@ import numpy as np
 import pytest
 
 from conftest import serve_dashboard
-from app.map_image import TARGET_RINGS
-from app.model_weights import model_problem, scorer_problems
-from app.session_worker import DashboardController
-from app.state import Notice, Snapshot
-from app.views import (
+from l3mvn_studio.map_image import TARGET_RINGS
+from l3mvn_studio.model_weights import model_problem, scorer_problems
+from l3mvn_studio.session_worker import DashboardController
+from l3mvn_studio.state import Notice, Snapshot
+from l3mvn_studio.views import (
     TOP_LABELS, _labelled_frontiers, _legend_html, _no_map_markdown, _status_markdown,
 )
-from l3mvn.config import Config, SimConfig
-from l3mvn.datasets import load_episode_set
-from l3mvn.errors import L3MVNError
-from l3mvn.events import StepEvent
-from l3mvn.viz import category_color
+from l3mvn.core.config import Config, SimConfig
+from l3mvn.world.datasets import load_episode_set
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.events import StepEvent
+from l3mvn.run.viz import category_color
 
 SMALL = Config(sim=SimConfig().with_frame(120, 160))
 
@@ -231,7 +231,7 @@ def test_random_walk_says_it_is_the_papers_baseline(ctl):
 
 def test_the_legend_swatches_are_told_apart():
     """Every category of the procedural houses and of Gibson has its own, clearly distinct colour."""
-    from l3mvn.datasets import load_episode_set
+    from l3mvn.world.datasets import load_episode_set
 
     es = load_episode_set(None, "val", houses=1, episodes_per_house=1, cfg=SMALL)
     names = es.scene_of(es.episodes[0]).categories
@@ -274,8 +274,8 @@ def test_drive_under_another_policy_says_which_one_drives(ctl):
 
 
 def test_teleop_refuses_to_act_on_its_own():
-    from l3mvn.agent.teleop import TeleopAgent
-    from l3mvn.policies.global_policies import GLOBAL_POLICIES
+    from l3mvn.agent.modular.teleop import TeleopAgent
+    from l3mvn.agent.policies.global_policies import GLOBAL_POLICIES
 
     agent = TeleopAgent(GLOBAL_POLICIES["cost-utility"](), ("chair",), SMALL)
     with pytest.raises(L3MVNError, match="acts only when driven"):
@@ -285,13 +285,13 @@ def test_teleop_refuses_to_act_on_its_own():
 def test_the_agents_collision_marks_show_on_its_map_in_their_own_legend_colour():
     """Forkland/0/6: marks laid on floor the map shows free closed the way to a seen toilet, and
     nothing on the page showed them. They are painted over free floor, in a colour no category has."""
-    from app.map_image import FREE, agent_map_view
-    from l3mvn.viz import COLLISION_RGB
-    from l3mvn.scenes.categories import SCAN_CATEGORIES
-    from l3mvn.scenes.procedural import PROCEDURAL_CATEGORIES
-    from l3mvn.events import Decision
-    from l3mvn.mapping import SemanticMap
-    from l3mvn.types import Action
+    from l3mvn_studio.map_image import FREE, agent_map_view
+    from l3mvn.run.viz import COLLISION_RGB
+    from l3mvn.world.scenes.categories import SCAN_CATEGORIES
+    from l3mvn.world.scenes.procedural import PROCEDURAL_CATEGORIES
+    from l3mvn.agent.decision import Decision
+    from l3mvn.agent.mapping import SemanticMap
+    from l3mvn.core.types import Action
 
     n = 80
     explored = np.zeros((n, n), bool)
@@ -316,12 +316,12 @@ def test_the_agents_collision_marks_show_on_its_map_in_their_own_legend_colour()
 def test_guessed_obstacles_show_apart_from_seen_ones_in_their_own_legend_colour():
     """An obstacle guessed from depth too near to read may close a doorway the agent then avoids: the
     map must show which obstacles are guesses."""
-    from app.map_image import GUESSED, OBSTACLE, agent_map_view
-    from l3mvn.scenes.categories import SCAN_CATEGORIES
-    from l3mvn.scenes.procedural import PROCEDURAL_CATEGORIES
-    from l3mvn.events import Decision
-    from l3mvn.mapping import SemanticMap
-    from l3mvn.types import Action
+    from l3mvn_studio.map_image import GUESSED, OBSTACLE, agent_map_view
+    from l3mvn.world.scenes.categories import SCAN_CATEGORIES
+    from l3mvn.world.scenes.procedural import PROCEDURAL_CATEGORIES
+    from l3mvn.agent.decision import Decision
+    from l3mvn.agent.mapping import SemanticMap
+    from l3mvn.core.types import Action
 
     n = 80
     explored = np.zeros((n, n), bool)

@@ -5,14 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from l3mvn.config import Config
-from l3mvn.episodes import (
+from l3mvn.core.config import Config
+from l3mvn.world.episodes import (
     episode_file, generate_episodes, read_episode_file, read_episodes, write_episode_file,
 )
-from l3mvn.errors import L3MVNError
-from l3mvn.task.regions import goal_region
-from l3mvn.scenes.semexp import load_split
-from l3mvn.types import Pose
+from l3mvn.core.errors import L3MVNError
+from l3mvn.world.task.regions import goal_region
+from l3mvn.world.scenes.semexp import load_split
+from l3mvn.core.types import Pose
 
 from conftest import GIBSON, needs_gibson
 

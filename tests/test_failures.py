@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from l3mvn.errors import L3MVNError
-from l3mvn.task.failures import CLASSES, classify_failure, failure_table
+from l3mvn.core.errors import L3MVNError
+from l3mvn.world.task.failures import CLASSES, classify_failure, failure_table
 
 
 def _row(key: str, failure: str, confirmed: bool | None = None) -> dict:

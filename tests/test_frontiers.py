@@ -13,9 +13,9 @@ import json
 import numpy as np
 import pytest
 
-from l3mvn.errors import L3MVNError
-from l3mvn.config import FrontierConfig
-from l3mvn.frontiers import Frontier, extract_frontiers
+from l3mvn.core.errors import L3MVNError
+from l3mvn.core.config import FrontierConfig
+from l3mvn.agent.frontiers import Frontier, extract_frontiers
 
 RES = 0.05
 

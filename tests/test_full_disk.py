@@ -50,7 +50,7 @@ def full(tmp_path):
 
 def _cli(*argv: str, cwd: Path = REPO) -> subprocess.CompletedProcess:
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
-    return subprocess.run([sys.executable, "-m", "app.cli", *argv], cwd=cwd, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", *argv], cwd=cwd, capture_output=True, text=True,
                           env=env, timeout=600)
 
 
@@ -92,7 +92,7 @@ def test_export_to_a_full_disk_is_an_error_and_leaves_no_partial_video(full, rec
 
 def _eval_recorded(out: Path, record_dir: Path, **popen) -> subprocess.CompletedProcess:
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
-    return subprocess.run([sys.executable, "-m", "app.cli", "eval", "--policy", "frontier", "--houses", "1",
+    return subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", "eval", "--policy", "frontier", "--houses", "1",
                            "--episodes-per-house", "2", *SMALL, "--out", str(out), "--record", "--record-dir",
                            str(record_dir)], cwd=REPO, capture_output=True, text=True, env=env, timeout=600, **popen)
 

@@ -1,7 +1,7 @@
 """Property-based fuzzing of every input parser: episode files, map files, ``--set`` and the CLI.
 
 Each test feeds generated malformed inputs to a public entry point and holds it to the contract of
-``l3mvn.errors``: a valid result, or ``L3MVNError`` with a one-line message (the CLI: exit status 2
+``l3mvn.core.errors``: a valid result, or ``L3MVNError`` with a one-line message (the CLI: exit status 2
 and one ``error:`` line; argparse's own SystemExit(2) is fine). Never another exception, never a hang,
 and a result that is accepted must be what the input said (an id 0.7 is not episode 0).
 
@@ -29,17 +29,17 @@ from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from l3mvn.cli import main
-from l3mvn.config import (
+from l3mvn.run.cli import main
+from l3mvn.core.config import (
     EDGE_MODES, SELECTIONS, SUCCESS_RULES, UTILITY_MODES, Config, config_dict, config_hash, override,
 )
-from l3mvn.config import settings as config_settings
-from l3mvn.episodes import (
+from l3mvn.core.config import settings as config_settings
+from l3mvn.world.episodes import (
     ROTATION_NORM_TOLERANCE, episode_file, episode_record, generate_episodes, read_episode_file, write_episode_file,
 )
-from l3mvn.errors import L3MVNError
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, GOAL_CATEGORIES
-from l3mvn.scenes.semexp import load_split, save_split
+from l3mvn.core.errors import L3MVNError
+from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
+from l3mvn.world.scenes.semexp import load_split, save_split
 
 from conftest import draw_two_room_house
 

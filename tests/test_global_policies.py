@@ -1,11 +1,11 @@
 import numpy as np
 
-from l3mvn.frontiers import Frontier
-from l3mvn.mapping import SemanticMap
-from l3mvn.config import PolicyConfig
-from l3mvn.registry import check_options
-from l3mvn.policies.global_policies import CostUtility, NearestFrontier, RandomSample
-from l3mvn.errors import L3MVNError
+from l3mvn.agent.frontiers import Frontier
+from l3mvn.agent.mapping import SemanticMap
+from l3mvn.core.config import PolicyConfig
+from l3mvn.run.registry import check_options
+from l3mvn.agent.policies.global_policies import CostUtility, NearestFrontier, RandomSample
+from l3mvn.core.errors import L3MVNError
 
 import pytest
 

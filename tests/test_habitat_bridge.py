@@ -19,26 +19,27 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from l3mvn.config import Config, SimConfig
-from l3mvn.episodes import generate_episodes
-from l3mvn.errors import L3MVNError
-from l3mvn.registry import make_policy
-from l3mvn.runner import Runner
-from l3mvn.scenes.procedural import generate_house
-from l3mvn.scenes.scene import SceneMap
-from l3mvn.session import EpisodeSession
-from l3mvn.sim import habitat_server as wire
-from l3mvn.sim.habitat_bridge import (
+from l3mvn.core.config import Config, SimConfig
+from l3mvn.world.episodes import generate_episodes
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.registry import make_policy
+from l3mvn.run.runner import Runner
+from l3mvn.world.scenes.procedural import generate_house
+from l3mvn.world.scenes.scene import SceneMap
+from l3mvn.run.session import EpisodeSession
+from l3mvn.world.sim import habitat_server as wire
+from l3mvn.world.sim.habitat_bridge import (
     ServerProcess,
     builtin_command,
     habitat_environment,
     habitat_floor_environment,
     start_environment,
 )
-from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.task import ObjectNavTask
-from l3mvn.task.regions import geodesic_field
-from l3mvn.types import Episode, Pose
+from l3mvn.world.sim.simulator import BuiltinSimulator
+from l3mvn.world.task import ObjectNavTask
+from l3mvn.world.task.regions import geodesic_field
+from l3mvn.core.types import Pose
+from l3mvn.world.episode import Episode
 
 SEED = 3
 CFG = SimConfig(frame_height=60, frame_width=80)
@@ -289,8 +290,8 @@ needs_habitat = pytest.mark.skipif(not HABITAT_PYTHON.exists(),
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory):
     """One procedural house in HM3D's layout, read back as an ObjectNav dataset of our own."""
-    from l3mvn.datasets import load_episode_set
-    from l3mvn.datasets.hm3d_export import export_hm3d
+    from l3mvn.world.datasets import load_episode_set
+    from l3mvn.world.datasets.hm3d_export import export_hm3d
 
     out = tmp_path_factory.mktemp("hm3d")
     config = Config(sim=CFG)
@@ -371,8 +372,8 @@ def test_habitat_keeps_the_passages_our_grid_keeps(tmp_path):
     """House 1's first episode crosses a door within a voxel of the body's width: with habitat's
     default 0.05 m cells its navmesh closed it (geodesic 2.06 x the file's); with the fitted cell
     every habitat geodesic is the file's within 5%."""
-    from l3mvn.datasets import load_episode_set
-    from l3mvn.datasets.hm3d_export import export_hm3d
+    from l3mvn.world.datasets import load_episode_set
+    from l3mvn.world.datasets.hm3d_export import export_hm3d
 
     config = Config(sim=SimConfig(frame_height=30, frame_width=40))
     summary = export_hm3d(tmp_path, 2, seed=0, episodes_per_floor=4, cfg=config)

@@ -17,14 +17,15 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from l3mvn.cli import main
-from l3mvn.config import Config, override
-from l3mvn.datasets import load_episode_set
-from l3mvn.episodes import episode_record, generate_episodes, read_episode_file, write_episode_file
-from l3mvn.errors import L3MVNError
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
-from l3mvn.scenes.semexp import load_split
-from l3mvn.types import Pose
+from l3mvn.run.cli import main
+from l3mvn.core.config import Config, override
+from l3mvn.world.datasets import load_episode_set
+from l3mvn.world.episodes import episode_record, generate_episodes, read_episode_file, write_episode_file
+from l3mvn.core.errors import L3MVNError
+from l3mvn.core.categories import GIBSON_CATEGORIES
+from l3mvn.world.scenes.scene import SceneMap
+from l3mvn.world.scenes.semexp import load_split
+from l3mvn.core.types import Pose
 
 from conftest import draw_two_room_house
 

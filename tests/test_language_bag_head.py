@@ -16,15 +16,15 @@ import pytest
 import torch
 
 from conftest import write_frontier_file
-from l3mvn.cli import main
-from l3mvn.config import PolicyConfig
-from l3mvn.errors import L3MVNError
-from l3mvn.language import GOALS, make_scorer, train_any_head
-from l3mvn.language.cooccurrence import load_stats
-from l3mvn.language.frontier_head import house_split, train_frontier_head
-from l3mvn.language.head import SHIPPED_HEADS, bag_features, load_head
-from l3mvn.language.rooms import split_of
-from l3mvn.language.train_head import train_head
+from l3mvn.run.cli import main
+from l3mvn.core.config import PolicyConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.agent.language import GOALS, make_scorer, train_any_head
+from l3mvn.agent.language.cooccurrence import load_stats
+from l3mvn.agent.language.frontier_head import house_split, train_frontier_head
+from l3mvn.agent.language.head import SHIPPED_HEADS, bag_features, load_head
+from l3mvn.agent.language.rooms import split_of
+from l3mvn.agent.language.train_head import train_head
 
 VALID = "valid: frontiers, rooms, frontiers-bag, rooms-bag"
 
@@ -56,9 +56,9 @@ _NO_EMBEDDER = """
 import json
 import sys
 import numpy as np
-from l3mvn.frontiers import Frontier
-from l3mvn.language.models import load_sentence_encoder
-from l3mvn.policies.language_policy import LanguageFrontierPolicy
+from l3mvn.agent.frontiers import Frontier
+from l3mvn.agent.language.models import load_sentence_encoder
+from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
 
 policy = LanguageFrontierPolicy("l3mvn-ff", "feedforward", head="HEAD")
 frontiers = [Frontier(id=i, cells=np.array([[10, 10 + i]]), center=(10, 10 + i), size=5, distance_m=1.0 + i,

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from l3mvn.errors import L3MVNError
-from l3mvn.language.cooccurrence import STATS_PATH, build_stats, load_stats, stats_table
-from l3mvn.language.rooms import Room, load_gibson_rooms, split_of
-from l3mvn.language.vocabulary import GOALS
+from l3mvn.core.errors import L3MVNError
+from l3mvn.agent.language.cooccurrence import STATS_PATH, build_stats, load_stats, stats_table
+from l3mvn.agent.language.rooms import Room, load_gibson_rooms, split_of
+from l3mvn.agent.language.vocabulary import GOALS
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 GIBSON = SHARED / "data" / "room_objects" / "gibson_3dsg_rooms.jsonl"

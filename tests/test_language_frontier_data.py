@@ -12,17 +12,18 @@ import pytest
 import torch
 
 from conftest import write_frontier_file
-from l3mvn.config import Config, FrontierConfig
-from l3mvn.errors import L3MVNError
-from l3mvn.eval.frontier_data import label_frontiers, read_done, window_object_distances
-from l3mvn.frontiers import extract_frontiers
-from l3mvn.language.frontier_file import frontier_query, load_choices
-from l3mvn.language.frontier_head import house_split, train_frontier_head
-from l3mvn.language.vocabulary import GOALS
-from l3mvn.mapping import SemanticMap
-from l3mvn.policies.oracle import object_distances
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, SceneMap
-from l3mvn.task import ObjectNavTask
+from l3mvn.core.config import Config, FrontierConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.eval.frontier_data import label_frontiers, read_done, window_object_distances
+from l3mvn.agent.frontiers import extract_frontiers
+from l3mvn.agent.language.frontier_file import frontier_query, load_choices
+from l3mvn.agent.language.frontier_head import house_split, train_frontier_head
+from l3mvn.agent.language.vocabulary import GOALS
+from l3mvn.agent.mapping import SemanticMap
+from l3mvn.world.baselines import object_distances
+from l3mvn.core.categories import GIBSON_CATEGORIES
+from l3mvn.world.scenes.scene import SceneMap
+from l3mvn.world.task import ObjectNavTask
 
 SIZE, RES = 200, 0.05
 HALL = (80, 120, 60, 141)  # rows r0:r1, cols c0:c1 (walls on its border)
@@ -146,7 +147,7 @@ def test_a_malformed_frontier_file_is_one_line_error(tmp_path):
 
 
 def test_generation_is_deterministic_for_a_seed_and_resumes_where_it_stopped(tiny_dataset, tmp_path):
-    from l3mvn.eval.frontier_data import generate_frontier_data
+    from l3mvn.run.eval.frontier_data import generate_frontier_data
 
     first, second = tmp_path / "a.jsonl", tmp_path / "b.jsonl"
     summary = generate_frontier_data(str(tiny_dataset), "val", first, houses=["Tiny"], limit=2)

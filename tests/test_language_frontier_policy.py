@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from l3mvn.errors import L3MVNError
-from l3mvn.frontiers import Frontier
-from l3mvn.language import GOALS, make_scorer
-from l3mvn.language.head import GoalHead, save_head
-from l3mvn.policies.language_policy import LanguageFrontierPolicy
+from l3mvn.core.errors import L3MVNError
+from l3mvn.agent.frontiers import Frontier
+from l3mvn.agent.language import GOALS, make_scorer
+from l3mvn.agent.language.head import GoalHead, save_head
+from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
 
 
 @pytest.fixture(scope="module")

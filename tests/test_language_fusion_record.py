@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from conftest import first_frontier_choice
-from l3mvn.frontiers import Frontier, Fusion
-from l3mvn.language import GOALS
-from l3mvn.policies.language_policy import LanguageFrontierPolicy
+from l3mvn.agent.frontiers import Frontier, Fusion
+from l3mvn.agent.language import GOALS
+from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
 
 RNG = np.random.default_rng(0)
 

@@ -11,9 +11,9 @@ from transformers import (  # noqa: E402
     GPT2Config, GPT2LMHeadModel, PreTrainedTokenizerFast, RobertaConfig, RobertaForMaskedLM,
 )
 
-from l3mvn.errors import L3MVNError  # noqa: E402
-from l3mvn.language import GOALS, make_scorer  # noqa: E402
-from l3mvn.language.queries import zero_shot_query  # noqa: E402
+from l3mvn.core.errors import L3MVNError  # noqa: E402
+from l3mvn.agent.language import GOALS, make_scorer  # noqa: E402
+from l3mvn.agent.language.queries import zero_shot_query  # noqa: E402
 
 CORPUS = [zero_shot_query(objs, g) for objs in [(), ("sink",), ("bed", "desk"), ("oven", "toilet")] for g in GOALS]
 CORPUS += [s.replace("A frontier area", "A room") for s in CORPUS]

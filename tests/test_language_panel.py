@@ -5,13 +5,13 @@ import re
 import numpy as np
 import pytest
 
-from app.language_panel import (
+from l3mvn_studio.language_panel import (
     BAR_PX, SHOWN_FRONTIERS, bar_html, frontier_card_html, fusion_html, language_html, shown_frontiers,
 )
-from app.state import FrontierMarker, MapView
-from l3mvn.frontiers import Fusion
-from l3mvn.language import GOALS
-from l3mvn.viz import category_color
+from l3mvn_studio.state import FrontierMarker, MapView
+from l3mvn.agent.frontiers import Fusion
+from l3mvn.agent.language import GOALS
+from l3mvn.run.viz import category_color
 
 FUSION = Fusion(rule="paper", branch="fused", choice=2, ids=(0, 1, 2, 3, 4), s_llm=(0.16, 0.10, 0.22, 0.05, 0.02),
                 explore=(0.6, 0.2, 0.4, 0.3, 0.0), compared=(0.24, 0.18, 0.27, 0.20, 0.15), bound=(0.15, 0.30))

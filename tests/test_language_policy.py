@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from conftest import first_frontier_choice
-from l3mvn.errors import L3MVNError
-from l3mvn.frontiers import Frontier
-from l3mvn.config import PolicyConfig
-from l3mvn.registry import POLICY_NAMES
-from l3mvn.policies.language_policy import LanguageFrontierPolicy
+from l3mvn.core.errors import L3MVNError
+from l3mvn.agent.frontiers import Frontier
+from l3mvn.core.config import PolicyConfig
+from l3mvn.run.registry import POLICY_NAMES
+from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
 
 
 def _frontier(i: int, objects: tuple[str, ...], s_cu: float, utility: float = 10.0) -> Frontier:

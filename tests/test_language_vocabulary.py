@@ -2,10 +2,10 @@
 
 import pytest
 
-from l3mvn.errors import L3MVNError
-from l3mvn.language.queries import feedforward_query, zero_shot_query
-from l3mvn.language.vocabulary import GOALS, canonical, check_goal, query_phrase, to_coco, to_gibson
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, GOAL_CATEGORIES
+from l3mvn.core.errors import L3MVNError
+from l3mvn.agent.language.queries import feedforward_query, zero_shot_query
+from l3mvn.agent.language.vocabulary import GOALS, canonical, check_goal, query_phrase, to_coco, to_gibson
+from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
 
 
 def test_goals_are_the_scene_goal_categories():

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from l3mvn.errors import L3MVNError
-from l3mvn.config import MapConfig, SimConfig
-from l3mvn.mapping import CameraIntrinsics, SemanticMapper, depth_to_points, downsample_frame
-from l3mvn.types import Pose
+from l3mvn.core.errors import L3MVNError
+from l3mvn.core.config import MapConfig, SimConfig
+from l3mvn.agent.mapping import SemanticMapper
+from l3mvn.core.camera import CameraIntrinsics, depth_to_points, downsample_frame
+from l3mvn.core.types import Pose
 
 H, W = 120, 160
 SIM = SimConfig()

@@ -3,10 +3,10 @@ import math
 import numpy as np
 import pytest
 
-from l3mvn.config import Config, TaskConfig
-from l3mvn.task.regions import geodesic_field, goal_region
-from l3mvn.eval.metrics import format_summary, summarize
-from l3mvn.task.scoring import EpisodeOutcome, score_episode
+from l3mvn.core.config import Config, TaskConfig
+from l3mvn.world.task.regions import geodesic_field, goal_region
+from l3mvn.run.eval.metrics import format_summary, summarize
+from l3mvn.world.task.scoring import EpisodeOutcome, score_episode
 
 
 def _outcome(**kw):

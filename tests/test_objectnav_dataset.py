@@ -14,14 +14,14 @@ import pytest
 pytest.importorskip("trimesh")
 pytest.importorskip("embreex")
 
-from l3mvn.cli import main  # noqa: E402
-from l3mvn.datasets import load_episode_set  # noqa: E402
-from l3mvn.datasets.hm3d_export import HM3D_GOAL_NAMES, export_hm3d  # noqa: E402
-from l3mvn.datasets.objectnav import FORMAT_RULES, dataset_rule, detect_format  # noqa: E402
-from l3mvn.config import SUCCESS_RULES  # noqa: E402
-from l3mvn.errors import L3MVNError  # noqa: E402
-from l3mvn.scenes.categories import GOAL_NAMES, SCAN_CATEGORIES, goal_category, raw_category  # noqa: E402
-from l3mvn.scenes.scene import GOAL_CATEGORIES  # noqa: E402
+from l3mvn.run.cli import main  # noqa: E402
+from l3mvn.world.datasets import load_episode_set  # noqa: E402
+from l3mvn.world.datasets.hm3d_export import HM3D_GOAL_NAMES, export_hm3d  # noqa: E402
+from l3mvn.world.datasets.objectnav import FORMAT_RULES, dataset_rule, detect_format  # noqa: E402
+from l3mvn.core.config import SUCCESS_RULES  # noqa: E402
+from l3mvn.core.errors import L3MVNError  # noqa: E402
+from l3mvn.world.scenes.categories import GOAL_NAMES, SCAN_CATEGORIES, goal_category, raw_category  # noqa: E402
+from l3mvn.core.categories import GOAL_CATEGORIES
 
 SCENE = "procedural-0000"
 MP3D_GOALS = ("chair", "table", "picture", "cabinet", "cushion", "sofa", "bed", "chest_of_drawers", "plant", "sink",
@@ -154,7 +154,7 @@ def test_a_scan_without_semantic_annotation_says_its_goals_cannot_be_seen(export
     shutil.copytree(exported / "scene_datasets", scans)
     for suffix in (".semantic.glb", ".semantic.txt"):
         (scans / "hm3d_v0.2" / "val" / f"00000-{SCENE}" / f"{SCENE}{suffix}").unlink()
-    with caplog.at_level("WARNING", logger="l3mvn.datasets.objectnav"):
+    with caplog.at_level("WARNING", logger="l3mvn.world.datasets.objectnav"):
         eset = load_episode_set(exported / "objectnav_hm3d_v2", "val", scenes_dir=scans)
     assert eset.episodes and "no goal object can be seen" in caplog.text and "--sim habitat" in caplog.text
 

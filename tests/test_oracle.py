@@ -3,12 +3,13 @@
 import json
 import math
 
-from l3mvn.cli import main
-from l3mvn.config import Config, SimConfig
-from l3mvn.policies.oracle import OraclePolicy
-from l3mvn.sim.simulator import BuiltinSimulator
-from l3mvn.types import Action, Episode, Pose
-from l3mvn.task import ObjectNavTask
+from l3mvn.run.cli import main
+from l3mvn.core.config import Config, SimConfig
+from l3mvn.world.baselines import OraclePolicy
+from l3mvn.world.sim.simulator import BuiltinSimulator
+from l3mvn.core.types import Action, Pose
+from l3mvn.world.episode import Episode
+from l3mvn.world.task import ObjectNavTask
 
 
 def _episode(scene, goal="toilet") -> Episode:
@@ -53,7 +54,7 @@ def test_the_oracle_succeeds_where_each_goal_has_a_single_view_point(tmp_path, c
     the oracle searches its way in over the motion model (each of these episodes failed without)."""
     import gzip
 
-    from l3mvn.datasets.hm3d_export import export_hm3d
+    from l3mvn.world.datasets.hm3d_export import export_hm3d
 
     export_hm3d(tmp_path, 4, seed=3)
     for content in (tmp_path / "objectnav_hm3d_v2" / "val" / "content").glob("*.json.gz"):

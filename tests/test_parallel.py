@@ -15,11 +15,11 @@ from pathlib import Path
 import pytest
 
 from conftest import draw_two_room_house
-from l3mvn.config import Config
-from l3mvn.episodes import episode_file, generate_episodes, write_episode_file
-from l3mvn.eval.backends import run_local
-from l3mvn.eval.job import EvalJob, is_error_row
-from l3mvn.scenes.semexp import save_split
+from l3mvn.core.config import Config
+from l3mvn.world.episodes import episode_file, generate_episodes, write_episode_file
+from l3mvn.run.eval.backends import run_local
+from l3mvn.run.eval.job import EvalJob, is_error_row
+from l3mvn.world.scenes.semexp import save_split
 
 REPO = Path(__file__).resolve().parents[1]
 METRICS = ("success", "spl", "dtg", "steps", "failure")
@@ -90,7 +90,7 @@ def test_a_worker_killed_mid_run_costs_a_retry_not_an_episode(tiny_dataset):
 
 
 def eval_cmd(dataset: Path, out: Path, *extra: str) -> list[str]:
-    return [sys.executable, "-m", "l3mvn.cli", "eval", "--dataset", str(dataset), "--policy", "oracle",
+    return [sys.executable, "-m", "l3mvn.run.cli", "eval", "--dataset", str(dataset), "--policy", "oracle",
             "--frame", "240x320", "--workers", "2", "--out", str(out), *extra]
 
 

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from l3mvn.errors import L3MVNError
-from l3mvn.config import PlannerConfig, SimConfig
-from l3mvn.planning import GeodesicField, LocalPlanner, Window, distance_field
-from l3mvn.planning.steering import Steering
-from l3mvn.types import Action
+from l3mvn.core.errors import L3MVNError
+from l3mvn.core.config import PlannerConfig, SimConfig
+from l3mvn.agent.planning import GeodesicField, LocalPlanner, Window, distance_field
+from l3mvn.agent.planning.steering import Steering
+from l3mvn.core.types import Action
 
 RES = 0.05
 SIM = SimConfig()

@@ -10,18 +10,18 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from l3mvn.config import SimConfig
-from l3mvn.errors import L3MVNError
-from l3mvn.scenes.procedural import (
+from l3mvn.core.config import SimConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.world.scenes.procedural import (
     MAX_ROOMS, MIN_ROOMS, PROCEDURAL_CATEGORIES, ProceduralHouse, build_house, generate_house,
     generate_houses, procedural_split,
 )
-from l3mvn.scenes.room_contents import (
+from l3mvn.world.scenes.room_contents import (
     ROOM_CONTENTS_PATH, build_room_contents, category_of, dump_room_contents, load_room_contents,
     room_categories,
 )
-from l3mvn.grid import disk
-from l3mvn.scenes.scene import GIBSON_CATEGORIES, GOAL_CATEGORIES
+from l3mvn.core.grid import disk
+from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
 
 SEEDS = range(30)
 RADIUS_CELLS = 4  # SimConfig.agent_radius_m = 0.18 m on 5 cm cells

@@ -13,11 +13,11 @@ from types import SimpleNamespace
 
 import pytest
 
-from l3mvn.config import Config
-from l3mvn.errors import L3MVNError
-from l3mvn.eval.backends import run_local
-from l3mvn.eval.job import EvalJob, is_error_row
-from l3mvn.eval.ray_backend import _connect, run_ray
+from l3mvn.core.config import Config
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.eval.backends import run_local
+from l3mvn.run.eval.job import EvalJob, is_error_row
+from l3mvn.run.eval.ray_backend import _connect, run_ray
 from test_parallel import REPO, complete_rows, eval_cmd, metrics_by_key, write_dataset
 
 ray = pytest.importorskip("ray")

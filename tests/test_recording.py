@@ -12,18 +12,18 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-from l3mvn.config import AgentConfig, Config, SimConfig
-from l3mvn.episodes import generate_episodes
-from l3mvn.errors import L3MVNError
-from l3mvn.events import EventBus
-from l3mvn.recording import (
+from l3mvn.core.config import AgentConfig, Config, SimConfig
+from l3mvn.world.episodes import generate_episodes
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.events import EventBus
+from l3mvn.run.recording import (
     Recorder, add_replay_arguments, list_recordings, open_recording, parse_recording_name, read_recording,
     recording_path, run_replay,
 )
-from l3mvn.recording.catalogue import unique_tag
-from l3mvn.recording.layout import LABELLED_FRONTIERS
-from l3mvn.runner import Runner
-from l3mvn.types import Action
+from l3mvn.run.recording.catalogue import unique_tag
+from l3mvn.run.recording.layout import LABELLED_FRONTIERS
+from l3mvn.run.runner import Runner
+from l3mvn.core.types import Action
 
 MAX_STEPS = 15
 CAMERA = {"/camera", "/camera/rgb", "/camera/depth", "/camera/semantic"}
@@ -98,7 +98,7 @@ def test_map_agent_episode_records_map_frontiers_goal_and_trajectory(tiny_scene,
 
 def test_the_agents_collision_marks_are_recorded_once_per_change_at_their_cells(tiny_scene, tmp_path, monkeypatch):
     """What closed a passage the map shows free (Forkland/0/6) must be visible in a replay too."""
-    from l3mvn.planning import LocalPlanner
+    from l3mvn.agent.planning import LocalPlanner
 
     marks = np.array([[480, 484], [481, 484], [482, 485]], np.int32)  # beside the start, the map centre
     monkeypatch.setattr(LocalPlanner, "collision_cells", property(lambda self: marks))
@@ -108,8 +108,8 @@ def test_the_agents_collision_marks_are_recorded_once_per_change_at_their_cells(
     assert len(positions) == 1  # the same array every step: written once
     assert np.allclose(positions[0], marks[:, ::-1] + 0.5)
     # The exported video draws them too: the last frame holds the marks' colour, and only because of them.
-    from l3mvn.recording.video import VideoOptions, frames, read_episode
-    from l3mvn.viz import COLLISION_RGB
+    from l3mvn.run.recording.video import VideoOptions, frames, read_episode
+    from l3mvn.run.viz import COLLISION_RGB
 
     episode = read_episode(recorder.path)
     assert np.allclose(episode.steps[-1].collision_marks, marks[:, ::-1] + 0.5)

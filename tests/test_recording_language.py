@@ -7,13 +7,14 @@ import math
 import pytest
 from rerun.chunk import RrdReader
 
-from l3mvn.config import AgentConfig, Config, SimConfig
-from l3mvn.events import EventBus
-from l3mvn.language import GOALS
-from l3mvn.recording import Recorder
-from l3mvn.recording.layout import LANGUAGE_BY_GOAL, LANGUAGE_CHOSEN
-from l3mvn.runner import Runner
-from l3mvn.types import Episode, Pose
+from l3mvn.core.config import AgentConfig, Config, SimConfig
+from l3mvn.run.events import EventBus
+from l3mvn.agent.language import GOALS
+from l3mvn.run.recording import Recorder
+from l3mvn.run.recording.layout import LANGUAGE_BY_GOAL, LANGUAGE_CHOSEN
+from l3mvn.run.runner import Runner
+from l3mvn.core.types import Pose
+from l3mvn.world.episode import Episode
 
 CONFIG = Config(sim=dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=40),
                 agent=AgentConfig(look_around_steps=2))

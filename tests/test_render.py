@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from l3mvn.config import SimConfig
-from l3mvn.errors import L3MVNError
-from l3mvn.sim.render import Renderer
-from l3mvn.types import Pose
-from l3mvn.sim.world import build_world
-from l3mvn.viz import category_palette, colorize_depth, colorize_semantic, legend, side_by_side
+from l3mvn.core.config import SimConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.world.sim.render import Renderer
+from l3mvn.core.types import Pose
+from l3mvn.world.sim.world import build_world
+from l3mvn.run.viz import category_palette, colorize_depth, colorize_semantic, legend, side_by_side
 
 from test_world import two_rooms
 

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from l3mvn.cli import main
-from l3mvn.eval.results import parse_line, row_problem
+from l3mvn.run.cli import main
+from l3mvn.run.eval.results import parse_line, row_problem
 
 REPO = Path(__file__).resolve().parents[1]
 METRICS = ("key", "success", "spl", "dtg", "steps", "failure")
@@ -197,7 +197,7 @@ def test_hostile_lines_are_reported_and_their_episodes_run_again(tiny_dataset, f
 
 def test_a_second_eval_on_a_running_evals_out_is_refused_and_writes_nothing(tiny_dataset, tmp_path, capsys,
                                                                           monkeypatch):
-    import l3mvn.eval.backends as backends
+    import l3mvn.run.eval.backends as backends
 
     real = backends.run_local
     out = tmp_path / "results.jsonl"
@@ -321,7 +321,7 @@ def test_a_disk_that_fills_mid_row_keeps_the_rows_before_and_no_partial_line(tin
     assert main(eval_args(tiny_dataset, out, "--episodes", "2")) == 0
     capsys.readouterr()
     before = out.read_bytes()
-    cmd = [sys.executable, "-m", "l3mvn.cli", *eval_args(tiny_dataset, out, "--resume")]
+    cmd = [sys.executable, "-m", "l3mvn.run.cli", *eval_args(tiny_dataset, out, "--resume")]
     full = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300,
                           preexec_fn=_file_size_limit(len(before) + 1000))
     assert full.returncode == 2 and "Traceback" not in full.stderr

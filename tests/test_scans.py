@@ -13,19 +13,19 @@ import pytest
 pytest.importorskip("trimesh")
 pytest.importorskip("embreex")
 
-from l3mvn.cli import main  # noqa: E402
-from l3mvn.config import Config, TaskConfig  # noqa: E402
-from l3mvn.datasets import load_episode_set  # noqa: E402
-from l3mvn.datasets.hm3d_export import STOREY_M, add_export_arguments, export_hm3d, run_export  # noqa: E402
-from l3mvn.datasets.objectnav import geodesic_agreement  # noqa: E402
-from l3mvn.errors import L3MVNError  # noqa: E402
-from l3mvn.scenes.categories import SCAN_CATEGORIES  # noqa: E402
-from l3mvn.scenes.procedural import procedural_split  # noqa: E402
-from l3mvn.scenes.scan import ScanFloor, find_floors, read_semantic_txt  # noqa: E402
-from l3mvn.scenes.scene import GOAL_CATEGORIES  # noqa: E402
-from l3mvn.sim.simulator import BuiltinSimulator  # noqa: E402
-from l3mvn.sim.world import build_world  # noqa: E402
-from l3mvn.task.regions import goal_region  # noqa: E402
+from l3mvn.run.cli import main  # noqa: E402
+from l3mvn.core.config import Config, TaskConfig  # noqa: E402
+from l3mvn.world.datasets import load_episode_set  # noqa: E402
+from l3mvn.world.datasets.hm3d_export import STOREY_M, add_export_arguments, export_hm3d, run_export  # noqa: E402
+from l3mvn.world.datasets.objectnav import geodesic_agreement  # noqa: E402
+from l3mvn.core.errors import L3MVNError  # noqa: E402
+from l3mvn.world.scenes.categories import SCAN_CATEGORIES  # noqa: E402
+from l3mvn.world.scenes.procedural import procedural_split  # noqa: E402
+from l3mvn.world.scenes.scan import ScanFloor, find_floors, read_semantic_txt  # noqa: E402
+from l3mvn.core.categories import GOAL_CATEGORIES
+from l3mvn.world.sim.simulator import BuiltinSimulator  # noqa: E402
+from l3mvn.world.sim.world import build_world  # noqa: E402
+from l3mvn.world.task.regions import goal_region  # noqa: E402
 
 HM3D = Config(task=TaskConfig(success_rule="hm3d")).with_frame(120, 160)
 
@@ -110,7 +110,7 @@ def test_navigable_grid_matches_the_exported_map(eset):
 
 
 def test_find_floors_keeps_storeys_apart():
-    from l3mvn.scenes.scan import _Hits
+    from l3mvn.world.scenes.scan import _Hits
 
     heights = np.concatenate([np.zeros(2000), np.full(1200, 0.75), np.full(1500, 2.9), np.full(100, 1.5)])
     hits = _Hits(np.arange(heights.size), heights, heights + 2.0, np.ones(heights.size, bool))
@@ -220,7 +220,7 @@ def test_semantic_txt_lines_are_checked(tmp_path):
 
 
 def test_scene_shortest_path_uses_the_file_unless_unreachable(eset):
-    from l3mvn.task import ObjectNavTask
+    from l3mvn.world.task import ObjectNavTask
 
     ep = eset.episodes[0]
     task = ObjectNavTask(eset.scene_of(ep), HM3D)
@@ -236,7 +236,7 @@ def test_semantic_mesh_coloured_per_vertex(exported, eset, tmp_path):
 
     import trimesh
 
-    from l3mvn.scenes.scan import _read_glb
+    from l3mvn.world.scenes.scan import _read_glb
 
     scans = tmp_path / "scans"
     shutil.copytree(exported / "scene_datasets", scans)
@@ -276,7 +276,7 @@ def test_steps_join_their_floor_and_furniture_does_not(tmp_path):
     found by rays is the room's, the raised half is walkable from it, the bed is an obstacle."""
     from scipy import ndimage as ndi
 
-    from l3mvn.scenes.scan import ScanFiles, load_scan
+    from l3mvn.world.scenes.scan import ScanFiles, load_scan
 
     path = _room(tmp_path / "room.glb")
     floors = load_scan("room", ScanFiles(path, None, None), HM3D.sim, goal_instances={}, view_points=[])
@@ -295,7 +295,7 @@ def test_steps_join_their_floor_and_furniture_does_not(tmp_path):
 def test_rendered_mesh_merges_vertices_finer_than_the_setting(tmp_path):
     import dataclasses
 
-    from l3mvn.scenes.scan import ScanFiles, load_scan
+    from l3mvn.world.scenes.scan import ScanFiles, load_scan
 
     # Subdivided 4 times, the 10 cm thick walls and 15 cm step have edges under a centimetre.
     files = ScanFiles(_room(tmp_path / "fine.glb", subdivisions=4), None, None)
@@ -304,9 +304,9 @@ def test_rendered_mesh_merges_vertices_finer_than_the_setting(tmp_path):
     merged = load_scan("room", files, HM3D.sim, goal_instances={}, view_points=[])[0]
     assert merged.mesh.triangles.shape[0] < 0.8 * kept.mesh.triangles.shape[0]
     assert np.array_equal(merged.navigable, kept.navigable)  # the ground truth uses every triangle
-    from l3mvn.sim.render import Renderer
-    from l3mvn.sim.world import build_world
-    from l3mvn.types import Pose
+    from l3mvn.world.sim.render import Renderer
+    from l3mvn.world.sim.world import build_world
+    from l3mvn.core.types import Pose
 
     view = Pose(*kept.cell_center(*np.argwhere(kept.navigable)[len(np.argwhere(kept.navigable)) // 2]), 0.0)
     a = Renderer(build_world(kept, HM3D.sim), HM3D.sim).render(view, 0.0)

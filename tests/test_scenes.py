@@ -8,8 +8,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from l3mvn.errors import L3MVNError
-from l3mvn.scenes.semexp import load_split, pick_floor, save_split
+from l3mvn.core.errors import L3MVNError
+from l3mvn.world.scenes.semexp import load_split, pick_floor, save_split
 
 from conftest import GIBSON, draw_two_room_house, needs_gibson
 

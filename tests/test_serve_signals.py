@@ -1,6 +1,6 @@
 """`l3mvn serve` and `l3mvn replay --web` run as a user runs them: stopped by signals, refused bad addresses.
 
-Each command runs as a real process (the installed script's entry point, ``app.cli.main``). What
+Each command runs as a real process (the installed script's entry point, ``l3mvn_studio.cli.main``). What
 is checked is what a user or a service manager would see: after SIGTERM (or SIGHUP, or the parent
 killed outright) nothing the command started is still running or listening; a bad or busy address
 is one line on stderr and status 2, before anything is served.
@@ -25,22 +25,22 @@ import pytest
 from conftest import draw_two_room_house
 
 from conftest import free_port
-from l3mvn.config import Config, SimConfig
-from l3mvn.episodes import generate_episodes
-from l3mvn.errors import L3MVNError
-from l3mvn.events import EventBus
-from l3mvn.recording import (
+from l3mvn.core.config import Config, SimConfig
+from l3mvn.world.episodes import generate_episodes
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.events import EventBus
+from l3mvn.run.recording import (
     Recorder,
     add_replay_arguments,
     read_recording,
     run_replay,
     viewer_executable,
 )
-from l3mvn.recording.catalogue import RecordingCut
-from l3mvn.runner import Runner
+from l3mvn.run.recording.catalogue import RecordingCut
+from l3mvn.run.runner import Runner
 
 ROOT = Path(__file__).resolve().parents[1]
-ENTRY = "import sys; from app.cli import main; sys.exit(main())"  # what the installed `l3mvn` runs
+ENTRY = "import sys; from l3mvn_studio.cli import main; sys.exit(main())"  # what the installed `l3mvn` runs
 START_S = 120.0  # generous: the suite may share two slow cores with other jobs
 STOP_S = 20.0  # the dashboard's threads each get 5 s to finish; the viewer 5 s before SIGKILL
 SERVE = ["serve", "--houses", "1", "--episodes-per-house", "1"]
@@ -214,7 +214,7 @@ def test_serve_with_a_bad_port_or_host_is_one_line_and_status_2(cli, argv, messa
 @pytest.mark.parametrize("port, message", [(None, "is in use on 127.0.0.1"), (99999, "--port must lie in 1..65535")])
 def test_a_port_lost_after_the_check_is_reported_not_moved_to_the_next_and_leaves_no_thread(port, message):
     """The race the up-front check cannot close: viser's own bind fails (viser would take the next port)."""
-    from app.viser_hooks import start_checked_server
+    from l3mvn_studio.viser_hooks import start_checked_server
 
     before = set(threading.enumerate())
     with socket.socket() as taken:

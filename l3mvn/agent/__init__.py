@@ -1,6 +1,8 @@
-"""The modular L3MVN agent: ``MapAgent`` runs the step; the target search and the exploration goals
-each keep their own state in their own module."""
+"""The agent side: everything that decides from observations alone, as habitat-baselines is to
+habitat-lab. Perception, mapping, frontiers, planning, the language prior, the global policies and
+the modular map agent (``modular``).
 
-from l3mvn.agent.map_agent import MapAgent
-
-__all__ = ["MapAgent"]
+Nothing here imports the world side (``l3mvn.world``: scenes, simulator, task): an agent gets an
+``EpisodeBrief`` and ``Observation``s and returns actions or ``Decision``s. ``tests/test_layers.py``
+keeps it so.
+"""

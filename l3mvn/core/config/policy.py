@@ -1,0 +1,47 @@
+"""Settings that change what a named policy does (``--scorer``, ``--selection``, ``--seg-noise``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from l3mvn.core.errors import L3MVNError
+
+# Language policies: the paper's bound rule, the thresholds of the authors' code, or (with a head that
+# predicts distances) the frontier with the least cost-utility metres (C - U / lambda) + expected metres
+# on to the goal (see l3mvn.agent.policies.language_policy).
+SELECTIONS = ("paper", "official_code", "expected")
+# Feed-forward heads: trained on frontiers of house maps, or on room object lists (the paper's recipe).
+# The default stays the room head: the frontier head's mean regret per choice is lower on the 6 Gibson
+# houses held out from its training (1.034 m against 1.177 m; cost-utility 0.959), but the episodes
+# say otherwise: l3mvn-ff on the 200 dev episodes SR / SPL 0.930 / 0.659 with it against 0.945 / 0.676
+# with the room head, and 0.979 / 0.662 against 0.979 / 0.690 on the 48 of the held-out houses (seed
+# spread +-0.025; docs/benchmarks.md, l3mvn/data/language/MODEL_CARD.md).
+# "-bag": the same head, data and recipe on a multi-hot bag of objects, without the language model
+# (the ablation that says what MiniLM adds; l3mvn/data/language/MODEL_CARD.md).
+HEAD_KINDS = ("frontiers", "rooms", "frontiers-bag", "rooms-bag")
+DEFAULT_HEAD = "rooms"
+HEAD_SCORER = "feedforward"  # the one language scorer that reads a head
+
+
+@dataclass(frozen=True)
+class PolicyConfig:
+    scorer: str | None = None  # language policies: a scorer instead of the policy's default
+    selection: str = "paper"
+    # The paper's bound B: language alone decides above bound_high, exploration alone below
+    # bound_low, and in between the two are fused (see l3mvn.agent.policies.language_policy).
+    bound_low: float = 0.15
+    bound_high: float = 0.30
+    seg_noise: float = 0.0  # map-based policies: perception errors (see l3mvn.agent.perception)
+    head: str | None = None  # feed-forward scorer: a head kind instead of DEFAULT_HEAD
+
+    def __post_init__(self) -> None:
+        if self.selection not in SELECTIONS:
+            raise L3MVNError(f"unknown selection {self.selection!r}; valid: {', '.join(SELECTIONS)}")
+        if self.head is not None and self.head not in HEAD_KINDS:
+            raise L3MVNError(f"unknown feed-forward head {self.head!r}; valid: {', '.join(HEAD_KINDS)}")
+        if not 0.0 <= self.bound_low < self.bound_high <= 1.0:
+            raise L3MVNError(f"the bound must satisfy 0 <= bound_low < bound_high <= 1, got {self.bound_low}, "
+                             f"{self.bound_high}")
+        if not (math.isfinite(self.seg_noise) and 0.0 <= self.seg_noise <= 1.0):
+            raise L3MVNError(f"seg_noise must lie in [0, 1], got {self.seg_noise}")

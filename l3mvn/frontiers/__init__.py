@@ -1,6 +1,0 @@
-"""Frontier extraction and cost-utility scoring on plain map arrays."""
-
-from l3mvn.frontiers.extract import extract_frontiers
-from l3mvn.frontiers.types import Frontier, Fusion
-
-__all__ = ["Frontier", "Fusion", "extract_frontiers"]
