@@ -389,7 +389,7 @@ class DashboardController:
         if self.policy_name in LANGUAGE_POLICIES and self.policy_name not in self._runner.floor(scene).policies:
             self._set_busy(f"loading the language model of {self.policy_name} (a few seconds, once)")
         # The same hash ``l3mvn eval`` writes for these settings, so dashboard runs can be matched.
-        chash = config_hash(cfg, extra={"policy": self.policy_name, "seed": self.seed})
+        chash = config_hash(cfg, self.policy_name, self.seed)
         self._session = self._runner.session(scene, self.policy_name, self.bus, config_hash=chash)
         self._manual, self._segment_note = None, ""
         if self.record:

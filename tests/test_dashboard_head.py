@@ -44,7 +44,7 @@ def _reset(c: DashboardController):
 
 
 def _hash(cfg: Config, policy: str) -> str:
-    return config_hash(cfg, extra={"policy": policy, "seed": 0})
+    return config_hash(cfg, policy, 0)
 
 
 def _with_head(head: str | None) -> Config:

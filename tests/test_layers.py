@@ -26,7 +26,7 @@ SIDES: dict[str, set[str]] = {
 }
 # Within a side, lowest first; a unit may import units of lower layers of its own side only.
 LAYERS: dict[str, list[set[str]]] = {
-    "core": [{"errors"}, {"types", "config", "grid", "paths", "writing", "categories"}, {"camera"}],
+    "core": [{"errors"}, {"types", "config", "grid", "paths", "writing", "categories", "json_values"}, {"camera"}],
     "world": [{"episode", "scenes"}, {"sim", "task"}, {"episodes"}, {"datasets"}, {"baselines"}],
     "agent": [{"decision", "perception", "mapping", "frontiers", "planning", "language"}, {"looking"},
               {"policies"}, {"modular"}],

@@ -15,7 +15,7 @@ import numpy as np
 
 from l3mvn.agent.mapping import SemanticMap
 from l3mvn.agent.planning import LocalPlanner
-from l3mvn.core.types import Action
+from l3mvn.core.types import Action, wrap_angle
 
 Cell = tuple[int, int]
 
@@ -26,7 +26,7 @@ def turn_towards(sem_map: SemanticMap, cell: Cell, tolerance_rad: float) -> Acti
     r, c = sem_map.agent_cell
     if (r, c) == tuple(cell):
         return None
-    off = (math.atan2(cell[0] - r, cell[1] - c) - sem_map.agent_heading + math.pi) % (2 * math.pi) - math.pi
+    off = wrap_angle(math.atan2(cell[0] - r, cell[1] - c) - sem_map.agent_heading)
     if abs(off) <= tolerance_rad:
         return None
     return Action.TURN_LEFT if off > 0 else Action.TURN_RIGHT
@@ -61,7 +61,7 @@ def pick_viewpoint(sem_map: SemanticMap, target: np.ndarray, planner: LocalPlann
     here = math.atan2(*(np.array(sem_map.agent_cell) - centre))  # as atan2(dr, dc), like the bearings
     bearings = np.arctan2(cells[:, 0] - centre[0], cells[:, 1] - centre[1])
     seen = np.array([*views, here])
-    gap = np.abs((bearings[:, None] - seen[None, :] + np.pi) % (2 * np.pi) - np.pi).min(axis=1)
+    gap = np.abs(wrap_angle(bearings[:, None] - seen[None, :])).min(axis=1)
     best = np.lexsort((field[cells[:, 0], cells[:, 1]], -np.round(gap, 1)))[0]
     return (int(cells[best, 0]), int(cells[best, 1])), here
 

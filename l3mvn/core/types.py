@@ -103,3 +103,8 @@ class EpisodeBrief:
     def key(self) -> str:
         """Globally unique id used for resuming runs and naming recordings."""
         return f"{self.scene}/{self.floor}/{self.episode_id}"
+
+
+def wrap_angle(angle):
+    """``angle`` (radians; a float or a numpy array) wrapped into [-pi, pi)."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi

@@ -377,7 +377,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from l3mvn.run.eval.backends import run_local
     from l3mvn.run.eval.job import EvalJob, is_error_row
     from l3mvn.run.eval.metrics import format_summary, summarize
-    from l3mvn.run.eval.results import ResultWriter, check_resumable, json_safe, row_problem
+    from l3mvn.core.json_values import json_safe
+    from l3mvn.run.eval.results import ResultWriter, check_resumable, row_problem
     from l3mvn.core.writing import make_folder
 
     if args.address and args.backend != "ray":
@@ -544,7 +545,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from l3mvn.world.scenes.semexp import pick_floor
     from l3mvn.world.sim.render import Renderer
     from l3mvn.world.sim.simulator import random_walkable_pose
-    from l3mvn.core.types import Pose
+    from l3mvn.core.types import Pose, wrap_angle
     from l3mvn.world.sim.world import build_world
     from l3mvn.run.viz import colorize_depth, colorize_semantic, side_by_side
     from l3mvn.core.writing import write_file
@@ -593,7 +594,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         if world.walls[r, c] or world.furniture[r, c] or scene.object_any[r, c]:
             raise L3MVNError(f"--pose {x:g},{y:g} is off the floor of {scene.key}: cell ({r}, {c}) is a wall, "
                              "furniture or an object; omit --pose for a random navigable pose")
-        return Pose(x, y, math.remainder(math.radians(h), 2 * math.pi))
+        return Pose(x, y, wrap_angle(math.radians(h)))
 
     cfg = _config(args).sim
     try:

@@ -16,7 +16,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from l3mvn.world.sim.simulator import BuiltinSimulator
-from l3mvn.core.types import Action, Observation, Pose
+from l3mvn.core.types import Action, Observation, Pose, wrap_angle
 from l3mvn.world.episode import Episode
 from l3mvn.world.task import GoalRegion, ObjectNavTask, geodesic_field
 
@@ -83,7 +83,7 @@ class OraclePolicy:
             # No single move helps (a corner tighter than one step): turn towards the path ahead.
             r, c = scene.cell_of(pose.x, pose.y)
             tx, ty = scene.cell_center(*self._descend(r, c))
-            err = (math.atan2(ty - pose.y, tx - pose.x) - pose.heading + math.pi) % (2 * math.pi) - math.pi
+            err = wrap_angle(math.atan2(ty - pose.y, tx - pose.x) - pose.heading)
             return Action.TURN_LEFT if err > 0 else Action.TURN_RIGHT
         if best_k == 0:
             return Action.MOVE_FORWARD

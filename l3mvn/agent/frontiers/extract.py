@@ -35,6 +35,7 @@ import numpy as np
 
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.config import FrontierConfig
+from l3mvn.core.types import wrap_angle
 from l3mvn.agent.frontiers.types import Frontier
 
 _NEIGHBOURS = np.array([(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)], dtype=np.int64)
@@ -280,7 +281,7 @@ def _turn_costs(centers: np.ndarray, agent_cell: tuple[int, int], heading: float
     if heading is None or cfg.turn_cost_m_per_rad == 0.0:
         return np.zeros(len(centers))
     bearing = np.arctan2(centers[:, 0] - agent_cell[0], centers[:, 1] - agent_cell[1])
-    error = np.abs((bearing - heading + np.pi) % (2 * np.pi) - np.pi)
+    error = np.abs(wrap_angle(bearing - heading))
     return cfg.turn_cost_m_per_rad * error
 
 

@@ -17,7 +17,7 @@ from l3mvn.core.config import MapConfig, SimConfig
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.grid import disk
 from l3mvn.core.camera import CameraIntrinsics, depth_to_points, too_near_points
-from l3mvn.core.types import Pose
+from l3mvn.core.types import Pose, wrap_angle
 
 
 @dataclass(frozen=True, eq=False)
@@ -305,7 +305,7 @@ class SemanticMapper:
         if len(px) == 0:
             return none
         dist = np.hypot(px, py)
-        bearing = (np.arctan2(py, px) - heading + np.pi) % (2 * np.pi) - np.pi
+        bearing = wrap_angle(np.arctan2(py, px) - heading)
         half = math.radians(self.intrinsics.hfov_deg) / 2
         idx = np.clip(((bearing + half) / (2 * half) * bins).astype(np.int64), 0, bins - 1)
         obstacle = z >= cfg.obstacle_min_height_m

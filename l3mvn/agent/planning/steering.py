@@ -13,7 +13,7 @@ import numpy as np
 
 from l3mvn.core.config import PlannerConfig
 from l3mvn.agent.planning.fmm import GeodesicField
-from l3mvn.core.types import Action
+from l3mvn.core.types import Action, wrap_angle
 
 # Directions of the rays that look for the short-term goal (5 degrees apart), sampled every half
 # cell so a ray cannot slip between two diagonal blocked cells.
@@ -119,7 +119,7 @@ class Steering:
 def _bearing_error(agent: tuple[int, int], heading: float, target: tuple[int, int]) -> float:
     """Radians from ``heading`` to the bearing of ``target``, in [-pi, pi)."""
     desired = math.atan2(target[0] - agent[0], target[1] - agent[1])
-    return (desired - heading + math.pi) % (2 * math.pi) - math.pi
+    return wrap_angle(desired - heading)
 
 
 def _rays(length_cells: int) -> tuple[np.ndarray, np.ndarray]:

@@ -111,11 +111,12 @@ def config_dict(cfg: Config) -> dict[str, Any]:
     return dataclasses.asdict(cfg)
 
 
-def config_hash(cfg: Config, extra: dict | None = None) -> str:
-    """A short stable hash of the tree (and extra settings such as the policy name and seed)."""
+def config_hash(cfg: Config, policy: str | None = None, seed: int | None = None) -> str:
+    """A short stable hash of the tree, and of a run's policy name and seed when given: the one
+    recipe behind every result line's ``config_hash`` (eval, the dashboard, re-runs)."""
     payload: dict[str, Any] = {"config": config_dict(cfg)}
-    if extra:
-        payload["extra"] = extra
+    if policy is not None or seed is not None:
+        payload["extra"] = {"policy": policy, "seed": seed}
     blob = json.dumps(payload, sort_keys=True, default=str).encode()
     return hashlib.sha1(blob).hexdigest()[:12]
 

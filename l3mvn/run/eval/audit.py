@@ -34,7 +34,7 @@ from scipy import ndimage as ndi
 from l3mvn.agent.modular.target import TargetSearch
 from l3mvn.core.config import Config
 from l3mvn.core.errors import L3MVNError
-from l3mvn.run.eval.results import json_safe
+from l3mvn.core.json_values import json_safe
 from l3mvn.world.task.regions import footprint_region
 from l3mvn.agent.mapping import SemanticMapper
 from l3mvn.core.camera import CameraIntrinsics
@@ -43,7 +43,7 @@ from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.sim.render import Renderer
 from l3mvn.world.sim.simulator import BuiltinSimulator
-from l3mvn.core.types import Pose
+from l3mvn.core.types import Pose, wrap_angle
 from l3mvn.world.episode import Episode
 from l3mvn.world.sim.world import World
 from l3mvn.run.viz import category_color
@@ -372,7 +372,7 @@ class FloorAuditor:
         self.mapper.reset(Pose(x - 0.5 * scene.resolution_m, y - 0.5 * scene.resolution_m, bearing))
         out = _Look()
         for j in offsets:
-            pose = Pose(x, y, _wrap(bearing + j * step))
+            pose = Pose(x, y, wrap_angle(bearing + j * step))
             for tilt_deg in audit.tilts_deg:
                 tilt = math.radians(tilt_deg)
                 frame = self.renderer.render(pose, tilt)
@@ -636,9 +636,6 @@ def _labels_in(labels: np.ndarray, mask: np.ndarray) -> list[int]:
     """The nonzero labels present under ``mask``, ascending."""
     return [int(v) for v in np.unique(labels[mask]) if v]
 
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _r(v: float | None) -> float | None:

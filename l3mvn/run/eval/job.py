@@ -51,7 +51,7 @@ class EvalJob:
         changes no result, so it is not hashed)."""
         config = config or Config()
         check_options(check_policy(policy), config.policy)
-        chash = config_hash(config, extra={"policy": policy, "seed": seed})
+        chash = config_hash(config, policy, seed)
         # Absolute paths, so workers started elsewhere (Ray) find the same files on a shared disk.
         source = None if dataset is None else str(Path(dataset).resolve())
         record = None if record_dir is None else str(Path(record_dir).resolve())

@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any, BinaryIO, Callable, Iterable, Iterator
 
 from l3mvn.core.config import SUCCESS_RULES
+from l3mvn.core.json_values import json_safe
 from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.run.eval.job import is_error_row
 from l3mvn.world.task.scoring import FAILURE_CAUSES
@@ -124,18 +125,6 @@ def encode_row(row: dict) -> bytes:
     except ValueError:
         text = json.dumps(json_safe(row), sort_keys=True, allow_nan=False)
     return (text + "\n").encode()
-
-
-def json_safe(value: Any) -> Any:
-    """``value`` with NaN and infinities as None, so that strict JSON can hold it (result lines, the
-    summary ``--json`` prints, the audit report)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(v) for v in value]
-    return value
 
 
 def parse_line(line: bytes) -> tuple[Any, str | None]:

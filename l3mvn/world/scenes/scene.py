@@ -16,7 +16,7 @@ from scipy import ndimage as ndi
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.grid import disk
 from l3mvn.core.categories import GOAL_CATEGORIES
-from l3mvn.core.types import Pose
+from l3mvn.core.types import Pose, wrap_angle
 
 @dataclass(frozen=True, eq=False)
 class SceneMap:
@@ -145,15 +145,12 @@ class SceneMap:
         w, _, qy, _ = (float(v) for v in rotation_wxyz)
         yaw = 2.0 * math.atan2(qy, w)
         ox, oy = self.origin_cm
-        return Pose(x=p2 - ox / 100.0, y=p0 - oy / 100.0, heading=_wrap(yaw + math.pi))
+        return Pose(x=p2 - ox / 100.0, y=p0 - oy / 100.0, heading=wrap_angle(yaw + math.pi))
 
     def pose_to_habitat(self, pose: Pose) -> tuple[list[float], list[float]]:
         ox, oy = self.origin_cm
-        yaw = _wrap(pose.heading - math.pi)
+        yaw = wrap_angle(pose.heading - math.pi)
         position = [pose.y + oy / 100.0, self.floor_height_m, pose.x + ox / 100.0]
         rotation = [math.cos(yaw / 2.0), 0.0, math.sin(yaw / 2.0), 0.0]
         return position, rotation
 
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi

@@ -18,7 +18,7 @@ from l3mvn.core.errors import L3MVNError
 from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.sim.base import EpisodeState
 from l3mvn.world.sim.render import Renderer
-from l3mvn.core.types import Action, Observation, Pose
+from l3mvn.core.types import Action, Observation, Pose, wrap_angle
 from l3mvn.world.episode import Episode
 from l3mvn.world.sim.world import build_world
 
@@ -72,7 +72,7 @@ class BuiltinSimulator(EpisodeState):
             collided = moved < self.cfg.forward_step_m - 1e-6
         elif action in (Action.TURN_LEFT, Action.TURN_RIGHT):
             sign = 1.0 if action == Action.TURN_LEFT else -1.0
-            heading = _wrap(pose.heading + sign * self.cfg.turn_angle_rad)
+            heading = wrap_angle(pose.heading + sign * self.cfg.turn_angle_rad)
             pose = Pose(pose.x, pose.y, heading)
         else:
             sign = 1.0 if action == Action.LOOK_UP else -1.0
@@ -120,9 +120,6 @@ class BuiltinSimulator(EpisodeState):
             goal=self._episode.goal, step=self._steps, collided=collided, categories=self.categories,
         )
 
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def random_walkable_pose(scene: SceneMap, rng: np.random.Generator) -> Pose:
