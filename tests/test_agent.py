@@ -91,8 +91,8 @@ def _until_set_aside(env, agent, offset_cells: int, max_steps: int):
     obs = env.reset(episode)
     agent.reset(episode)
     agent.act(obs)
-    row, col = agent._mapper.map.agent_cell
-    noise = agent._mapper.map.category("toilet")
+    row, col = agent.perception.map.agent_cell
+    noise = agent.perception.map.category("toilet")
     assert not noise.any()
     noise[row, col + offset_cells] = True
     decisions = []
@@ -131,7 +131,7 @@ def test_manual_goal_is_followed_recorded_and_cleared_once_reached(env):
     session = EpisodeSession(env, ObjectNavTask(env.scene, _tree(env)), agent, policy_name="frontier", config_hash="t")
     session.start(episode)
     session.step()
-    row, col = agent._mapper.map.agent_cell
+    row, col = agent.perception.map.agent_cell
     cell = (row + 20, col + 10)  # 1.1 m away in the open west room
     agent.set_manual_goal(cell)
     seen = []
@@ -254,8 +254,8 @@ def test_a_target_the_agent_cannot_get_closer_to_is_stopped_at_within_the_succes
     obs = env.reset(episode)
     agent.reset(episode)
     agent.act(obs)
-    row, col = agent._mapper.map.agent_cell
-    toilet = agent._mapper.map.category("toilet")
+    row, col = agent.perception.map.agent_cell
+    toilet = agent.perception.map.category("toilet")
     toilet[row + offset[0]:row + offset[0] + 2, col + offset[1]:col + offset[1] + 2] = True
     plan = agent.planner.plan
     agent.planner.plan = lambda *a, **k: dataclasses.replace(plan(*a, **k), stuck=stuck)

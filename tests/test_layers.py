@@ -28,7 +28,7 @@ SIDES: dict[str, set[str]] = {
 LAYERS: dict[str, list[set[str]]] = {
     "core": [{"errors"}, {"types", "config", "grid", "paths", "writing", "categories", "json_values"}, {"camera"}],
     "world": [{"episode", "scenes"}, {"sim", "task"}, {"episodes"}, {"datasets"}, {"baselines"}],
-    "agent": [{"decision", "perception", "mapping", "frontiers", "planning", "language"}, {"looking"},
+    "agent": [{"decision", "mapping", "frontiers", "planning", "language"}, {"perception", "looking"},
               {"policies"}, {"modular"}],
     "run": [{"events", "viz", "serving"}, {"registry", "session"}, {"runner", "recording"}, {"eval"}, {"cli"}],
     "studio": [{"*"}],

@@ -23,9 +23,8 @@ from l3mvn.core.config import Config
 from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.decision import EXPLORING, Decision, GoalKind
 from l3mvn.agent.looking import distance_to, mask_centre, turn_towards, unknown_near
-from l3mvn.agent.mapping import SemanticMap, SemanticMapper
-from l3mvn.core.camera import downsample_frame
-from l3mvn.agent.perception import SegmentationNoise
+from l3mvn.agent.mapping import SemanticMap
+from l3mvn.agent.perception import Perception
 from l3mvn.agent.planning import LocalPlanner
 from l3mvn.agent.policies.global_policies import GlobalPolicy
 from l3mvn.core.types import Action, EpisodeBrief, Observation, Pose
@@ -44,11 +43,9 @@ class MapAgent:
         self.sim = config.sim
         self.seed = seed
         self.planner = LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim)
-        self.noise = SegmentationNoise(config.policy.seg_noise, len(categories), seed)
+        self.perception = Perception(config, categories, seed)
         self.target = TargetSearch(config.agent)
         self.explore = ExplorationGoals(global_policy, config, self.planner)
-        self._mapper: SemanticMapper | None = None
-        self._frame_shape: tuple[int, int] | None = None
         self.stuck = False
 
     # --- episode lifecycle -------------------------------------------------------------------
@@ -57,18 +54,15 @@ class MapAgent:
         self.planner.reset()
         ep_seed = zlib.crc32(episode.key.encode())
         self.rng = np.random.default_rng([self.seed, ep_seed])
-        self.noise.reset(ep_seed)
+        self.perception.reset(episode.start, ep_seed)
         self.target.reset()
         self.explore.reset()
-        self._mapper = None  # built on the first frame, sized from it
-        self._start = episode.start
         self._steps = 0
         self._manual: tuple[int, int] | None = None
         self._prev_pose: Pose | None = None
         self._prev_action: Action | None = None
         self._unreachable = 0
         self._escape: list[Action] = []
-        self._frame: tuple[np.ndarray, np.ndarray] | None = None  # the last mapped depth and labels
         self._progress: tuple[tuple[int, int] | None, float, int] = (None, math.inf, 0)  # goal, best m, steps
         self.stuck = False
 
@@ -97,7 +91,7 @@ class MapAgent:
     # --- one step ----------------------------------------------------------------------------
     def act(self, obs: Observation) -> Decision:
         t = {"start": time.perf_counter()}
-        sem_map = self._update_map(obs)
+        sem_map = self.perception.update(obs.depth, obs.semantic, obs.pose, obs.tilt)
         t["mapping"] = time.perf_counter()
         last_move = None
         if self._prev_action == Action.MOVE_FORWARD and self._prev_pose is not None:
@@ -294,10 +288,9 @@ class MapAgent:
     def _far_sighting(self, sem_map: SemanticMap) -> tuple[int, int] | None:
         if self.goal not in self.categories:
             return None
-        depth, semantic = self._frame
-        return self.target.far_sighting(sem_map, depth, semantic, self.categories.index(self.goal) + 1,
-                                        self._mapper.intrinsics.focal_px, self.sim.max_depth_m,
-                                        self.explore.blocked)
+        frame = self.perception.frame
+        return self.target.far_sighting(sem_map, frame.depth, frame.semantic, self.categories.index(self.goal) + 1,
+                                        frame.intrinsics.focal_px, self.sim.max_depth_m, self.explore.blocked)
 
     def _start_escape(self) -> None:
         self.planner.clear_collisions()
@@ -306,18 +299,6 @@ class MapAgent:
         turn = Action.TURN_LEFT if self.rng.random() < 0.5 else Action.TURN_RIGHT
         moves = [turn] * int(self.rng.integers(1, 7)) + [Action.MOVE_FORWARD] * 2
         self._escape = moves[::-1]  # popped from the end
-
-    def _update_map(self, obs: Observation) -> SemanticMap:
-        factor = self.cfg.downsample_factor(*obs.depth.shape)
-        depth, semantic = (obs.depth, obs.semantic) if factor == 1 else downsample_frame(obs.depth, obs.semantic, factor)
-        semantic = self.noise(semantic)
-        if self._mapper is None or self._frame_shape != depth.shape:
-            self._mapper = SemanticMapper.for_sim(self.config.map, self.sim, depth.shape[0], depth.shape[1],
-                                                  self.categories)
-            self._mapper.reset(self._start)
-            self._frame_shape = depth.shape
-        self._frame = (depth, semantic)
-        return self._mapper.update(depth, semantic, obs.pose, obs.tilt)
 
     def _decide(self, obs, action, sem_map, ltg, kind, reason, t, stg, override, extra_ms=None) -> Decision:
         self._prev_pose, self._prev_action = obs.pose, action
