@@ -165,7 +165,7 @@ def test_reached_frontiers_are_not_chosen_again(env):
         gaps = np.hypot(*(np.array(blocked) - np.array(d.long_term_goal)).T)
         # A frontier stood on and looked beyond blocks only half the radius: the explorer's own radii
         # (new done goals are appended after the ones this choice saw).
-        radii = agent.explore._blocked_radii(0.05)[: len(blocked)]
+        radii = agent.explore.blocked_radii(0.05)[: len(blocked)]
         assert (radii >= radius / 2).all() and (gaps > radii).all()
         chosen += 1
     assert chosen > 0
@@ -195,18 +195,16 @@ def test_random_sample_keeps_its_goal_until_reached_while_frontier_policies_rese
 
 
 def test_an_exploration_goal_that_gets_no_nearer_is_given_up_after_the_patience(env):
-    from types import SimpleNamespace
-
     agent = _agent(env, goal_patience_steps=5)
     agent.reset(_episode())
     goal = (10, 10)
     # Circling: the path keeps changing and the distance wanders without a 0.5 m gain.
     wander = [8.0, 8.3, 7.8, 8.1, 7.9]
-    assert not any(agent._stalled(goal, SimpleNamespace(distance_to_goal_m=d)) for d in wander)
-    assert agent._stalled(goal, SimpleNamespace(distance_to_goal_m=8.0))
+    assert not any(agent.wayfinder.progress.stalled(goal, d) for d in wander)
+    assert agent.wayfinder.progress.stalled(goal, 8.0)
     # Real progress restarts the count, and so does a new goal.
-    assert not agent._stalled(goal, SimpleNamespace(distance_to_goal_m=7.0))
-    assert not agent._stalled((20, 20), SimpleNamespace(distance_to_goal_m=9.0))
+    assert not agent.wayfinder.progress.stalled(goal, 7.0)
+    assert not agent.wayfinder.progress.stalled((20, 20), 9.0)
     with pytest.raises(L3MVNError, match="goal_patience_steps"):
         AgentConfig(goal_patience_steps=0)
 
@@ -230,8 +228,8 @@ def _walled_target_map(agent_cell):
 @pytest.mark.parametrize("rule", ["semexp", "geodesic"])
 def test_a_target_behind_a_wall_is_approached_as_the_success_rule_measures(rule):
     agent = MapAgent(NearestFrontier(), ("toilet",), Config(task=TaskConfig(success_rule=rule)))
-    far = agent._plan(*_walled_target_map((50, 60)), "target", None)
-    beside_wall = agent._plan(*_walled_target_map((50, 97)), "target", None)
+    far = agent.wayfinder.plan(*_walled_target_map((50, 60)), "target", None)
+    beside_wall = agent.wayfinder.plan(*_walled_target_map((50, 97)), "target", None)
     if rule == "semexp":
         # Straight-line success: the floor on this side of the wall, within 0.9 m of the toilet.
         assert far.reachable and far.distance_to_goal_m < 2.0 and far.short_term_goal[1] > 60
@@ -282,7 +280,7 @@ def test_a_stuck_agent_escapes_under_its_own_goal_kind(env):
     assert "escaping" in first.reason and first.goal_kind in (GoalKind.FRONTIER, GoalKind.EXPLORE)
     agent.planner.plan = plan
     rest = []
-    while agent._escape:
+    while agent.wayfinder.escape.active:
         rest.append(agent.act(obs))
     assert rest and all(d.goal_kind is GoalKind.ESCAPE and d.goal_kind.name == "ESCAPE" for d in rest)
     assert [d.action for d in rest][-2:] == [Action.MOVE_FORWARD] * 2
@@ -441,9 +439,9 @@ def test_a_kept_frontier_names_why_it_was_chosen_once_not_once_per_keep():
     cells = np.zeros((1, 2), np.int64)
     goals.frontiers = [Frontier(k, cells, (100, 100 + 40 * k), 5, 1.0, 1.0, 1.0, 0.5) for k in range(2)]
     goals.cell, goals.frontier = (100, 100), 0
-    goals.reason = goals._chosen_reason = "nearest frontier (1.0 m)"
+    goals.reason = goals.chosen_reason = "nearest frontier (1.0 m)"
     for _ in range(3):
-        sel = goals._commit(Selection(1, (100, 140), np.array([0.5, 0.6]), "nearest frontier (0.9 m)"))
+        sel = goals.commit(Selection(1, (100, 140), np.array([0.5, 0.6]), "nearest frontier (0.9 m)"))
         assert sel.frontier == 0
         goals.reason = sel.reason
     assert goals.reason == "kept frontier 0 (commitment): nearest frontier (1.0 m)"
@@ -480,7 +478,7 @@ def test_a_frontier_too_near_for_a_new_list_is_looked_beyond_before_the_timer_ch
         goals.tick()
     assert goals.due(at((100, 80)))  # still on the way: the timer re-selects as usual
     near = at((door[0] + 7, door[1]))  # 0.35 m from the door
-    assert all(f.center[0] > 62 for f in goals._extract(near))  # why it matters: the door is gone
+    assert all(f.center[0] > 62 for f in goals.extract(near))  # why it matters: the door is gone
     assert not goals.due(near)
 
 

@@ -27,7 +27,7 @@ SIDES: dict[str, set[str]] = {
 # Within a side, lowest first; a unit may import units of lower layers of its own side only.
 LAYERS: dict[str, list[set[str]]] = {
     "core": [{"errors"}, {"types", "config", "grid", "paths", "writing", "categories", "json_values"}, {"camera"}],
-    "world": [{"episode", "scenes"}, {"sim", "task"}, {"episodes"}, {"datasets"}, {"baselines"}],
+    "world": [{"episode", "scenes"}, {"sim"}, {"task"}, {"episodes"}, {"datasets"}, {"baselines"}],
     "agent": [{"decision", "mapping", "frontiers", "planning", "language"}, {"perception", "looking"},
               {"policies"}, {"modular"}],
     "run": [{"events", "viz", "serving"}, {"registry", "session"}, {"runner", "recording"}, {"eval"}, {"cli"}],

@@ -11,7 +11,7 @@ from l3mvn.world.task.scoring import EpisodeOutcome, score_episode
 
 def _outcome(**kw):
     base = dict(stopped=True, in_success_region=True, steps=40, path_length_m=6.0, shortest_path_m=5.0,
-                final_distance_m=0.0, saw_target=True, entered_region=True, recent_collision_rate=0.0)
+                final_distance_m=0.0, saw_target=True, entered_region=True, recent_collision_rate=0.0, coverage=0.3)
     base.update(kw)
     return EpisodeOutcome(**base)
 

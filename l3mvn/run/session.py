@@ -1,13 +1,16 @@
 """The navigation loop, one step at a time: environment + policy -> StepEvents on a bus.
 
 The evaluator runs a session to the end; the dashboard steps one interactively, can change the target
-mid-episode (a new, clearly marked segment) and hand the policy a manual long-term goal.
+mid-episode (a new, clearly marked segment) and hand the policy a manual long-term goal. The task
+judges the episode from the simulator alone; what a policy says of itself (its Decisions) is kept
+apart, as agent diagnostics, and never decides a failure cause.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import replace
+from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 from l3mvn.core.errors import L3MVNError
@@ -21,8 +24,6 @@ from l3mvn.world.task import EpisodeMeasures, EpisodeOutcome, EpisodeResult, Obj
 
 class Policy(Protocol):
     """What the session drives: ``act`` returns an Action, or a Decision that explains itself."""
-
-    stuck: bool  # the policy's own "I am stuck" signal (a failure cause)
 
     def reset(self, episode: EpisodeBrief) -> None: ...
 
@@ -73,7 +74,8 @@ class EpisodeSession:
         self.sim_seconds = time.perf_counter() - t0
         self.policy.reset(episode.brief)
         self._obs = obs
-        self.measures = EpisodeMeasures(self.task, episode, obs)
+        self.measures = EpisodeMeasures(self.task, self.env, episode, obs)
+        self.diagnostics = AgentDiagnostics()
         return self._publish(obs, None, None)
 
     @property
@@ -90,7 +92,9 @@ class EpisodeSession:
         t0 = time.perf_counter()
         obs = self.env.step(decision.action)
         self.sim_seconds += time.perf_counter() - t0
-        self.measures.update(obs, decision.action, decision.target_seen)
+        self.measures.update(obs, decision.action)
+        if isinstance(out, Decision):
+            self.diagnostics.update(out)
         self._obs = obs
         if self.env.done:
             self._result = self._score()
@@ -173,10 +177,7 @@ class EpisodeSession:
     def _score(self) -> EpisodeResult:
         env, ep = self.env, self.episode
         assert ep is not None
-        # The map of the last published decision (map-based agents keep one map and update it).
-        decision = self.last_event.decision if self.last_event is not None else None
-        outcome = self.measures.outcome(env, agent_reported_stuck=self.policy.stuck,
-                                        sem_map=decision.map if decision is not None else None)
+        outcome = self.measures.outcome()
         success, spl, dtg, cause = score_episode(outcome, self.task.cfg.task)
         return EpisodeResult(
             key=ep.key, scene=ep.scene, floor=ep.floor, episode_id=ep.episode_id, goal=ep.goal,
@@ -187,10 +188,39 @@ class EpisodeSession:
         )
 
     def _extra(self, outcome: EpisodeOutcome) -> dict:
+        """The task's measures behind the failure cause (``coverage``: the share of the reachable floor
+        the frames showed; ``confirmed``: the goal was in view well enough to confirm), and under
+        ``agent`` what the policy reported of itself."""
         extra: dict = {"segments": self.segment + 1} if self.segment else {}
-        if outcome.coverage is not None:
-            # Map-based agents: whether the map ever confirmed the target (>= target_min_cells), which
-            # tells a target glimpsed but never confirmed from one confirmed but not reached.
-            extra["coverage"] = round(outcome.coverage, 3)
-            extra["confirmed"] = self.measures.confirmed
+        extra["coverage"] = round(outcome.coverage, 3)
+        extra["confirmed"] = self.measures.confirmed
+        if self.diagnostics.decisions:
+            extra["agent"] = self.diagnostics.to_json(self.task, self.episode)
         return extra
+
+
+@dataclass
+class AgentDiagnostics:
+    """What a policy that explains itself reported about itself over an episode: whether it ever had
+    a confirmed target as its goal, whether its planner was stuck at the end, and how much of the
+    reachable floor its own map marks explored. Shown beside the task's measures, never used for them."""
+
+    decisions: int = 0
+    confirmed: bool = False
+    stuck: bool = False
+    last: Decision | None = None
+
+    def update(self, decision: Decision) -> None:
+        self.decisions += 1
+        self.confirmed = self.confirmed or decision.target_seen
+        self.stuck = decision.stuck
+        self.last = decision
+
+    def to_json(self, task: ObjectNavTask, episode: Episode | None) -> dict:
+        out: dict = {"confirmed": self.confirmed, "stuck": self.stuck}
+        sem_map = None if self.last is None else self.last.map
+        if sem_map is not None and episode is not None:
+            rows, cols = task.reachable_cells(episode.start)
+            if len(rows):
+                out["coverage"] = round(float(sem_map.explored_at(*task.scene.cell_center(rows, cols)).mean()), 3)
+        return out

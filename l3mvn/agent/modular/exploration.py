@@ -41,7 +41,7 @@ class ExplorationGoals:
         self.kind = GoalKind.NONE
         self.frontier: int | None = None  # index into ``frontiers`` of the chosen frontier
         self.reason = ""
-        self._chosen_reason = ""  # why the frontier being kept was first chosen
+        self.chosen_reason = ""  # why the frontier being kept was first chosen
         self.frontiers: list[Frontier] = []
         self.blocked: list[Cell] = []  # done goals: no frontier is taken near them again
         self.stood: set[Cell] = set()  # done goals the agent stood on and looked beyond
@@ -83,7 +83,7 @@ class ExplorationGoals:
         """Extract frontiers and let the global policy choose; returns (frontier ms, policy ms).
         With no frontier left, look at what was only seen from afar before revisiting old goals."""
         t0 = time.perf_counter()
-        self.frontiers = self._extract(sem_map)
+        self.frontiers = self.extract(sem_map)
         if not self.frontiers and (look := self._look_goal(sem_map)) is not None:
             self.since_select = 0
             self.cell, self.kind, self.frontier = look, GoalKind.LOOK, None
@@ -95,12 +95,12 @@ class ExplorationGoals:
             # ``min_cluster_cells``, and the agent drew unreachable random cells for 75-160 steps
             # (Newfields/0/3, Mifflinburg/0/0). The edge beside a guess is a frontier then; the
             # planner still walks round the guesses, and seeing the floor beyond takes them back.
-            self.frontiers = self._extract(sem_map, sem_map.seen_obstacle)
+            self.frontiers = self.extract(sem_map, sem_map.seen_obstacle)
         if not self.frontiers and self.blocked:
             # Every frontier left was reached once and is still there (the camera could not clear
             # it from where the agent stood): visiting them again beats wandering at random.
             self.blocked.clear()
-            self.frontiers = self._extract(sem_map)
+            self.frontiers = self.extract(sem_map)
         t1 = time.perf_counter()
         self._select(sem_map, goal, rng)
         return (t1 - t0) * 1e3, (time.perf_counter() - t1) * 1e3
@@ -112,7 +112,7 @@ class ExplorationGoals:
         return look_goal(sem_map, self.planner, self.blocked, self.blocked_radius_cells(sem_map.resolution_m),
                          self.cfg.look_min_area_m2)
 
-    def _extract(self, sem_map: SemanticMap, obstacle: np.ndarray | None = None) -> list[Frontier]:
+    def extract(self, sem_map: SemanticMap, obstacle: np.ndarray | None = None) -> list[Frontier]:
         """Frontiers of the map, cut where ``obstacle`` (default: the map's, guesses included) lies."""
         obstacle = sem_map.obstacle if obstacle is None else obstacle
         # The field must cover every explored cell: frontiers far from any obstacle (the open end of
@@ -127,10 +127,10 @@ class ExplorationGoals:
                                  sem_map.categories, sem_map.category_names, self.config.frontiers,
                                  resolution_m=sem_map.resolution_m,
                                  blocked=np.array(self.blocked, dtype=np.int64).reshape(-1, 2),
-                                 blocked_radius_cells=self._blocked_radii(sem_map.resolution_m),
+                                 blocked_radius_cells=self.blocked_radii(sem_map.resolution_m),
                                  agent_heading=sem_map.agent_heading)
 
-    def _blocked_radii(self, resolution_m: float) -> np.ndarray:
+    def blocked_radii(self, resolution_m: float) -> np.ndarray:
         """Cells around each done goal where frontiers are dropped: ``blocked_radius_m``, halved for a
         frontier the agent stood on and looked beyond (only that spot is done: Lakeville/0/1's
         bathroom door lay 0.7 m from such a spot and the full radius dropped it for good)."""
@@ -150,14 +150,14 @@ class ExplorationGoals:
             self.kind, self.frontier = GoalKind.EXPLORE, None
             self.reason = "no frontier: exploring a random free cell"
             return
-        kept = self._commit(sel)
+        kept = self.commit(sel)
         if kept is sel:  # a new choice: what a later keep quotes
-            self._chosen_reason = sel.reason
+            self.chosen_reason = sel.reason
         self.cell, self.frontier = kept.cell, kept.frontier
         self.kind = GoalKind.FRONTIER if kept.frontier is not None else GoalKind.RANDOM
         self.reason = kept.reason
 
-    def _commit(self, sel: Selection) -> Selection:
+    def commit(self, sel: Selection) -> Selection:
         """Hysteresis: stay with the frontier pursued so far unless the new best is clearly better
         (re-selecting every 10 steps with position-dependent scores otherwise flips between targets)."""
         if self.cell is None or self.frontier is None or sel.frontier is None or not self.frontiers:
@@ -169,7 +169,7 @@ class ExplorationGoals:
             return sel
         if sel.scores[sel.frontier] - sel.scores[j] < self.cfg.commitment_margin:
             f = self.frontiers[j]
-            return Selection(j, f.center, sel.scores, f"kept frontier {f.id} (commitment): {self._chosen_reason}")
+            return Selection(j, f.center, sel.scores, f"kept frontier {f.id} (commitment): {self.chosen_reason}")
         return sel
 
 

@@ -29,8 +29,14 @@ class TaskConfig:
     # out of steps is "stuck".
     collision_window: int = 50
     stuck_collision_rate: float = 0.5
-    # Map coverage above which a target never seen counts as hidden rather than not yet explored.
+    # The share of the reachable floor seen above which a target never seen counts as hidden rather
+    # than not yet explored.
     explored_coverage: float = 0.9
+    # The goal counts as confirmed in view once this many connected cells of it were seen with valid
+    # depth (the measure's counterpart of the agent's AgentConfig.target_min_cells, judged on the truth).
+    confirm_min_cells: int = 4
+    # Frames are judged strided to at most this many rows (what the task reads of a frame, not the agent).
+    view_rows: int = 120
 
     def __post_init__(self) -> None:
         if self.success_rule not in SUCCESS_RULES:
@@ -39,8 +45,9 @@ class TaskConfig:
             raise L3MVNError(f"success_distance_m must be a positive finite number, got {self.success_distance_m}")
         if not (math.isfinite(self.view_point_distance_m) and self.view_point_distance_m > 0):
             raise L3MVNError(f"view_point_distance_m must be a positive finite number, got {self.view_point_distance_m}")
-        if self.collision_window < 1:
-            raise L3MVNError(f"collision_window must be >= 1, got {self.collision_window}")
+        for name in ("collision_window", "confirm_min_cells", "view_rows"):
+            if getattr(self, name) < 1:
+                raise L3MVNError(f"{name} must be >= 1, got {getattr(self, name)}")
         for name in ("seen_fraction", "stuck_collision_rate", "explored_coverage"):
             if not 0 < getattr(self, name) <= 1:
                 raise L3MVNError(f"{name} must lie in (0, 1], got {getattr(self, name)}")

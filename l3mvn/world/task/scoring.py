@@ -15,8 +15,8 @@ FAILURE_CAUSES = (
     "success",
     "false_stop",  # called stop outside the success region
     "never_saw_target",  # ran out of steps without the target ever in view
-    # ... although the agent's map covered most of the reachable floor: the target hides behind
-    # something (a toilet behind a sink in a narrow bathroom) and shows only from a few places
+    # ... although the frames showed most of the reachable floor: the target hides behind something
+    # and shows only from a few places
     "unseen_in_explored",
     "saw_target_not_reached",  # saw it, never entered the success region
     "timeout",  # was in the success region at some point but never stopped there
@@ -30,7 +30,8 @@ FAILURE_CAUSES = (
 
 @dataclass
 class EpisodeOutcome:
-    """What the runner observed during one episode; turned into metrics by ``score_episode``."""
+    """What the task measured of one episode (``EpisodeMeasures``); turned into metrics by
+    ``score_episode``."""
 
     stopped: bool
     in_success_region: bool
@@ -41,9 +42,8 @@ class EpisodeOutcome:
     saw_target: bool
     entered_region: bool
     recent_collision_rate: float
-    agent_reported_stuck: bool = False
-    # Fraction of the reachable floor the agent's map marks explored (None: the policy keeps no map).
-    coverage: float | None = None
+    # The share of the reachable floor the frames showed (``views.ViewRecord``).
+    coverage: float
 
 
 @dataclass
@@ -89,13 +89,13 @@ def score_episode(o: EpisodeOutcome, cfg: TaskConfig) -> tuple[float, float, flo
         cause = "no_path"
     elif o.stopped:
         cause = "false_stop"
-    elif o.agent_reported_stuck or o.recent_collision_rate >= cfg.stuck_collision_rate:
+    elif o.recent_collision_rate >= cfg.stuck_collision_rate:
         cause = "stuck"
     elif o.entered_region:
         cause = "timeout"
     elif o.saw_target:
         cause = "saw_target_not_reached"
-    elif o.coverage is not None and o.coverage >= cfg.explored_coverage:
+    elif o.coverage >= cfg.explored_coverage:
         cause = "unseen_in_explored"
     else:
         cause = "never_saw_target"
