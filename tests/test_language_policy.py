@@ -7,7 +7,7 @@ from conftest import first_frontier_choice
 from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.frontiers import Frontier
 from l3mvn.core.config import PolicyConfig
-from l3mvn.run.registry import POLICY_NAMES
+from l3mvn.run.registry import policy_names
 from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
 
 
@@ -55,7 +55,7 @@ def test_official_code_feedforward_falls_back_to_best_utility_below_0_2():
 
 
 def test_table_ii_ablations_are_named_policies():
-    assert {"near+llm", "exp", "exp+llm", "l3mvn-zs", "l3mvn-ff"} <= set(POLICY_NAMES)
+    assert {"near+llm", "exp", "exp+llm", "l3mvn-zs", "l3mvn-ff"} <= set(policy_names())
 
 
 def test_unknown_selection_is_a_clear_error():

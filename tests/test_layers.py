@@ -26,11 +26,11 @@ SIDES: dict[str, set[str]] = {
 }
 # Within a side, lowest first; a unit may import units of lower layers of its own side only.
 LAYERS: dict[str, list[set[str]]] = {
-    "core": [{"errors"}, {"types", "config", "grid", "paths", "writing", "categories", "json_values"}, {"camera"}],
+    "core": [{"errors"}, {"types", "config", "grid", "paths", "writing", "categories", "json_values", "plugins"}, {"camera"}],
     "world": [{"episode", "scenes"}, {"sim"}, {"task"}, {"episodes"}, {"datasets"}, {"baselines"}],
     "agent": [{"decision", "mapping", "frontiers", "planning", "language"}, {"perception", "looking"},
               {"policies"}, {"modular"}],
-    "run": [{"events", "viz", "serving"}, {"registry", "session"}, {"runner", "recording"}, {"eval"}, {"cli"}],
+    "run": [{"events", "viz", "serving"}, {"session"}, {"registry"}, {"runner", "recording"}, {"eval"}, {"cli"}],
     "studio": [{"*"}],
 }
 # Same-layer imports that are allowed, as (importer, imported).

@@ -110,7 +110,7 @@ def _library_commands() -> dict[str, Command]:
 
 
 def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentParser:
-    from l3mvn.run.registry import POLICY_NAMES, TELEOP
+    from l3mvn.run.registry import policy_names
 
     parser = argparse.ArgumentParser(prog="l3mvn", description="L3MVN Studio: language-guided ObjectNav")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -118,7 +118,7 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     ev = sub.add_parser("eval", help="run episodes with a policy and report SR / SPL / DTG")
     _add_source_args(ev)
     _add_sim_args(ev)
-    ev.add_argument("--policy", required=True, choices=[p for p in POLICY_NAMES if p != TELEOP],
+    ev.add_argument("--policy", required=True, choices=policy_names(driven=False),
                     help="(teleop is driven by hand: `l3mvn serve`)")
     ev.add_argument("--episodes", type=_positive, default=None, help="run only the first N episodes")
     ev.add_argument("--episodes-per-house", type=_positive, default=10, help="procedural episodes per house")

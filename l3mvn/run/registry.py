@@ -1,79 +1,215 @@
-"""Policies by name: each is built for the environment it will act in and is an object with
-``reset(episode)`` and ``act(observation) -> Action | Decision``.
+"""Policies by name: each is a ``PolicySpec`` that builds an object with ``reset(episode)`` and
+``act(observation) -> Action | Decision``.
 
-``oracle`` and ``random-walk`` act directly; every other name is the map-based agent with a different
-global policy (only the choice of long-term goal differs between them). ``oracle-frontier`` is that
-agent with a global policy that reads the ground truth: the ceiling for any frontier prior. The
-paper's Table II ablations are names too: ``exp`` (= cost-utility), ``exp+llm`` (= l3mvn-ff) and
-``near+llm``; ground truth vs noisy segmentation is ``--seg-noise``. ``teleop`` is the map-based agent
-with a person choosing each action (the dashboard's Drive keys); it refuses to act on its own.
+The built-in policies are registered here: ``oracle`` and ``random-walk`` (world-side baselines that
+act directly), and the map-based agent with different global policies (only the choice of long-term
+goal differs between them). ``oracle-frontier`` is that agent handed the world's ground-truth
+distances: the ceiling for any frontier prior. The paper's Table II ablations are names too: ``exp``
+(= cost-utility), ``exp+llm`` (= l3mvn-ff) and ``near+llm``. ``teleop`` is the map-based agent with a
+person choosing each action (the dashboard's Drive keys); it refuses to act on its own.
+
+A researcher's own policy registers from its own package under the entry-point group
+``l3mvn.policies`` (see ``l3mvn.core.plugins``): the entry point names a ``PolicySpec``. It then runs in
+``l3mvn eval --policy NAME`` and appears in the dashboard like a built-in one.
+
+A spec sees only what its kind may: an agent gets the categories, the config tree and a seed; only a
+spec marked ``ground_truth`` is handed the environment and the task.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cache
+
 from l3mvn.agent.modular import MapAgent
 from l3mvn.agent.modular.teleop import TeleopAgent
-from l3mvn.core.config import Config, PolicyConfig
-from l3mvn.core.errors import L3MVNError
-from l3mvn.agent.policies.global_policies import GLOBAL_POLICIES, RandomSample
+from l3mvn.agent.policies.global_policies import CostUtility, GlobalPolicy, NearestFrontier, RandomSample
 from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
 from l3mvn.agent.policies.oracle_frontier import FrontierOracle
+from l3mvn.core.config import Config, PolicyConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.core.plugins import discover
+from l3mvn.run.session import Policy
 from l3mvn.world.baselines import ObjectDistances, OraclePolicy, RandomWalkPolicy
+from l3mvn.world.sim.base import Environment
 from l3mvn.world.sim.simulator import BuiltinSimulator
 from l3mvn.world.task import ObjectNavTask
 
-DIRECT_POLICIES = ("oracle", "random-walk")
-# name -> (default scorer, exploration score, paradigm)
-LANGUAGE_POLICIES = {
-    "l3mvn-zs": ("roomtype", "cost-utility", "zero-shot"),
-    "l3mvn-ff": ("feedforward", "cost-utility", "feedforward"),
-    "near+llm": ("feedforward", "nearest", "feedforward"),
-}
-ALIASES = {"exp": "cost-utility", "exp+llm": "l3mvn-ff"}
-TELEOP = "teleop"  # the map-based agent driven by hand from the dashboard (l3mvn.agent.modular.teleop)
-POLICY_NAMES: tuple[str, ...] = (
-    DIRECT_POLICIES + tuple(GLOBAL_POLICIES) + ("oracle-frontier",) + tuple(LANGUAGE_POLICIES) + tuple(ALIASES)
-    + (TELEOP,)
+PLUGIN_GROUP = "l3mvn.policies"
+
+
+@dataclass(frozen=True)
+class PolicyContext:
+    """What a spec builds a policy from. ``env`` and ``task`` are set only for a ``ground_truth`` spec."""
+
+    categories: tuple[str, ...]
+    config: Config
+    seed: int
+    env: Environment | None = None
+    task: ObjectNavTask | None = None
+
+
+@dataclass(frozen=True)
+class Language:
+    """A language policy's defaults: the scorer it reads, the exploration score it fuses with, and
+    the paradigm of the paper it follows (zero-shot or feed-forward)."""
+
+    scorer: str
+    exploration: str
+    paradigm: str
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    """A policy by name. ``map_based``: it maps the semantic frames (``--seg-noise`` applies; the
+    dashboard draws its map and frontiers); ``language``: it scores frontiers with a language scorer
+    (``--scorer``, ``--selection`` and ``--head`` apply); ``driven``: a person chooses its actions, so it
+    never runs by itself (no eval, no comparison); ``ground_truth``: it reads the world, so it is built
+    with the environment and the task; ``same_as``: another name for that policy (the paper's)."""
+
+    name: str
+    build: Callable[[PolicyContext], Policy]
+    summary: str
+    map_based: bool = True
+    language: Language | None = None
+    driven: bool = False
+    ground_truth: bool = False
+    same_as: str | None = None
+
+
+def _map_agent(global_policy: Callable[[PolicyContext], GlobalPolicy]) -> Callable[[PolicyContext], Policy]:
+    def build(ctx: PolicyContext) -> Policy:
+        return MapAgent(global_policy(ctx), ctx.categories, ctx.config, ctx.seed)
+
+    return build
+
+
+def _language(name: str, language: Language) -> Callable[[PolicyContext], Policy]:
+    def policy(ctx: PolicyContext) -> GlobalPolicy:
+        p = ctx.config.policy
+        return LanguageFrontierPolicy(name, p.scorer or language.scorer, language.exploration, p.selection,
+                                      language.paradigm, (p.bound_low, p.bound_high), p.head,
+                                      ctx.config.frontiers.cu_lambda)
+
+    return _map_agent(policy)
+
+
+def _oracle(ctx: PolicyContext) -> Policy:
+    if not isinstance(ctx.env, BuiltinSimulator):
+        raise L3MVNError("policy 'oracle' plans on the built-in simulator's own motion model: run it with "
+                         "--sim builtin (oracle-frontier reads the ground truth on any simulator)")
+    assert ctx.task is not None
+    return OraclePolicy(ctx.env, ctx.task)
+
+
+def _oracle_frontier(ctx: PolicyContext) -> GlobalPolicy:
+    assert ctx.task is not None
+    return FrontierOracle(ObjectDistances(ctx.task))
+
+
+def _teleop(ctx: PolicyContext) -> Policy:
+    # Frontiers scored by cost-utility, so the page shows what the agent would do.
+    return TeleopAgent(CostUtility(), ctx.categories, ctx.config, ctx.seed)
+
+
+_ZERO_SHOT = Language("roomtype", "cost-utility", "zero-shot")
+_FEED_FORWARD = Language("feedforward", "cost-utility", "feedforward")
+_NEAR_FEED_FORWARD = Language("feedforward", "nearest", "feedforward")
+
+BUILT_IN: tuple[PolicySpec, ...] = (
+    PolicySpec("oracle", _oracle, "ground-truth shortest path: a check of the simulator and the metrics",
+               map_based=False, ground_truth=True),
+    PolicySpec("random-walk", lambda ctx: RandomWalkPolicy(ctx.seed), "uniformly random actions (the paper's baseline)",
+               map_based=False),
+    PolicySpec("frontier", _map_agent(lambda ctx: NearestFrontier()), "the nearest frontier (Yamauchi)"),
+    PolicySpec("cost-utility", _map_agent(lambda ctx: CostUtility()),
+               "the frontier with the best size for its distance (the paper's Exp)"),
+    PolicySpec("random-sample", _map_agent(lambda ctx: RandomSample(ctx.config.planner.obstacle_dilation_cells)),
+               "a random unexplored cell of the local map"),
+    PolicySpec("oracle-frontier", _map_agent(_oracle_frontier),
+               "the frontier nearest the goal by the ground truth: the ceiling for any frontier prior",
+               ground_truth=True),
+    PolicySpec("l3mvn-zs", _language("l3mvn-zs", _ZERO_SHOT),
+               "zero-shot language scores fused with cost-utility (the paper's L3MVN-ZS)", language=_ZERO_SHOT),
+    PolicySpec("l3mvn-ff", _language("l3mvn-ff", _FEED_FORWARD),
+               "the feed-forward head's scores fused with cost-utility (the paper's L3MVN-FF)", language=_FEED_FORWARD),
+    PolicySpec("near+llm", _language("near+llm", _NEAR_FEED_FORWARD),
+               "the feed-forward head's scores fused with the nearest frontier (the paper's Table II)",
+               language=_NEAR_FEED_FORWARD),
+    PolicySpec("exp", _map_agent(lambda ctx: CostUtility()), "= cost-utility (the paper's Table II name)",
+               same_as="cost-utility"),
+    PolicySpec("exp+llm", _language("l3mvn-ff", _FEED_FORWARD), "= l3mvn-ff (the paper's Table II name)",
+               language=_FEED_FORWARD, same_as="l3mvn-ff"),
+    PolicySpec("teleop", _teleop, "the map-based agent driven by hand in the dashboard", driven=True),
 )
 
 
+@cache
+def _registry() -> tuple[dict[str, PolicySpec], dict[str, str]]:
+    """Built-ins and plugins by name (loaded once per process), and why any plugin was left out."""
+    specs = {spec.name: spec for spec in BUILT_IN}
+
+    def accept(name: str, obj: object) -> str | None:
+        if not isinstance(obj, PolicySpec):
+            return f"is a {type(obj).__name__}, not an l3mvn.run.registry.PolicySpec"
+        if obj.name != name:
+            return f"names its spec {obj.name!r}: the entry point and the spec must have one name"
+        return None
+
+    found = discover(PLUGIN_GROUP, accept, frozenset(specs))
+    return {**specs, **found.objects}, found.problems
+
+
+def policies() -> dict[str, PolicySpec]:
+    """Every policy by name: the built-in ones, then the installed plugins'."""
+    return dict(_registry()[0])
+
+
+def policy_names(*, driven: bool = True, same: bool = True) -> tuple[str, ...]:
+    """Policy names; ``driven=False`` leaves out those a person drives, ``same=False`` the other names."""
+    return tuple(name for name, spec in _registry()[0].items()
+                 if (driven or not spec.driven) and (same or spec.same_as is None))
+
+
+def policy_spec(name: str) -> PolicySpec:
+    """The spec of ``name``; an unknown name is a one-line error naming the valid ones (and a plugin
+    of that name that could not be loaded, with why)."""
+    specs, problems = _registry()
+    if name not in specs:
+        why = f" ({problems[name]})" if name in problems else ""
+        raise L3MVNError(f"unknown policy {name!r}{why}; valid policies: {', '.join(specs)}")
+    return specs[name]
+
+
 def check_policy(name: str) -> str:
-    if name not in POLICY_NAMES:
-        raise L3MVNError(f"unknown policy {name!r}; valid policies: {', '.join(POLICY_NAMES)}")
+    policy_spec(name)
     return name
 
 
 def check_options(name: str, options: PolicyConfig) -> None:
     """Refuse settings the policy would ignore (they would still change the config hash)."""
-    resolved = ALIASES.get(check_policy(name), name)
-    language = tuple(LANGUAGE_POLICIES) + tuple(a for a, t in ALIASES.items() if t in LANGUAGE_POLICIES)
-    if resolved not in LANGUAGE_POLICIES and (options.scorer is not None or options.selection != "paper"):
-        raise L3MVNError(f"--scorer and --selection apply to language policies only ({', '.join(language)}), not {name!r}")
-    if resolved in DIRECT_POLICIES and options.seg_noise:
+    spec = policy_spec(name)
+    if spec.language is None and (options.scorer is not None or options.selection != "paper"):
+        language = ", ".join(n for n, s in _registry()[0].items() if s.language is not None)
+        raise L3MVNError(f"--scorer and --selection apply to language policies only ({language}), not {name!r}")
+    if not spec.map_based and options.seg_noise:
         raise L3MVNError(f"--seg-noise applies to map-based policies; {name!r} does not read the semantic frames")
 
 
-def make_policy(name: str, env: BuiltinSimulator, task: ObjectNavTask, config: Config, seed: int = 0):
+def make_policy(name: str, env: Environment, task: ObjectNavTask, config: Config, seed: int = 0) -> Policy:
     """A fresh policy ``name`` for ``env`` under ``config`` (its ``policy`` section must suit the
-    policy, see ``check_options``); only the ground-truth policies read ``task``."""
+    policy, see ``check_options``); only a ground-truth spec is handed ``env`` and ``task``."""
     check_options(name, config.policy)
-    name = ALIASES.get(name, name)
-    if name == "oracle":
-        return OraclePolicy(env, task)
-    if name == "random-walk":
-        return RandomWalkPolicy(seed)
-    if name == TELEOP:  # frontiers scored by cost-utility, so the page shows what the agent would do
-        return TeleopAgent(GLOBAL_POLICIES["cost-utility"](), env.categories, config, seed)
-    if name in LANGUAGE_POLICIES:
-        scorer, exploration, paradigm = LANGUAGE_POLICIES[name]
-        p = config.policy
-        global_policy = LanguageFrontierPolicy(name, p.scorer or scorer, exploration, p.selection, paradigm,
-                                               (p.bound_low, p.bound_high), p.head,
-                                               config.frontiers.cu_lambda)
-    elif name == "oracle-frontier":
-        global_policy = FrontierOracle(ObjectDistances(task))
-    elif name == RandomSample.name:
-        global_policy = RandomSample(config.planner.obstacle_dilation_cells)
-    else:
-        global_policy = GLOBAL_POLICIES[name]()
-    return MapAgent(global_policy, env.categories, config, seed)
+    spec = policy_spec(name)
+    world = {"env": env, "task": task} if spec.ground_truth else {}
+    return spec.build(PolicyContext(tuple(env.categories), config, seed, **world))
+
+
+# TEMPORARY (removed once the dashboard reads the functions above)
+POLICY_NAMES = policy_names()
+TELEOP = "teleop"
+DIRECT_POLICIES = tuple(n for n, s in policies().items() if not s.map_based)
+LANGUAGE_POLICIES = {n: (s.language.scorer, s.language.exploration, s.language.paradigm)
+                     for n, s in policies().items() if s.language is not None and s.same_as is None}
+ALIASES = {n: s.same_as for n, s in policies().items() if s.same_as is not None}

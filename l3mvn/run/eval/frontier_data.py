@@ -37,7 +37,7 @@ from l3mvn.agent.language.vocabulary import GOALS, canonical
 from l3mvn.agent.mapping import SemanticMap
 from l3mvn.agent.policies.oracle_frontier import frontier_goal_distances
 from l3mvn.world.baselines import object_distances
-from l3mvn.run.registry import DIRECT_POLICIES, LANGUAGE_POLICIES, POLICY_NAMES
+from l3mvn.run.registry import PolicySpec, policies
 from l3mvn.run.runner import Runner
 from l3mvn.world.scenes.semexp import load_split
 from l3mvn.world.task.regions import GoalRegion
@@ -179,10 +179,12 @@ def generate_frontier_data(dataset: str, split: str, out: str | Path, *, seeds: 
                            progress: Callable[[int, int], None] | None = None) -> dict:
     """Walk every (episode, seed) of the split (only ``houses`` if given, the first ``limit`` episodes
     per house if given) and append its choices to ``out``; returns counts of what the file holds."""
-    if policy not in POLICY_NAMES or policy in DIRECT_POLICIES or policy in LANGUAGE_POLICIES \
-            or policy == "oracle-frontier":
-        valid = [p for p in POLICY_NAMES if p not in DIRECT_POLICIES and p not in LANGUAGE_POLICIES
-                 and p not in ("oracle-frontier", "exp+llm")]
+    def walks(spec: PolicySpec) -> bool:  # a map agent that reads no language model and no ground truth
+        return spec.map_based and spec.language is None and not spec.ground_truth and not spec.driven
+
+    specs = policies()
+    if policy not in specs or not walks(specs[policy]):
+        valid = [name for name, spec in specs.items() if walks(spec)]
         raise L3MVNError(f"policy {policy!r} cannot walk frontier data (it must read no language model and "
                          f"no ground truth); valid: {', '.join(valid)}")
     if not seeds or any(s < 0 for s in seeds):

@@ -11,10 +11,12 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from functools import cache
 
 import numpy as np
 
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.plugins import discover
 from l3mvn.agent.language.cooccurrence import CooccurrenceStats, load_stats
 from l3mvn.agent.language.queries import zero_shot_query
 from l3mvn.agent.language.vocabulary import GOALS, canonical, check_goal
@@ -112,6 +114,7 @@ class Scorer(ABC):
 
 
 _REGISTRY: dict[str, Callable[..., Scorer]] = {}
+PLUGIN_GROUP = "l3mvn.scorers"  # a researcher's own scorers: entry points naming a Scorer subclass
 
 
 def register(name: str):
@@ -123,24 +126,40 @@ def register(name: str):
 
 
 def scorer_names() -> tuple[str, ...]:
-    _import_all()
-    return tuple(sorted(_REGISTRY))
+    """The built-in scorers, then the installed plugins' (``l3mvn.core.plugins``)."""
+    return tuple(sorted(_built_in())) + tuple(_plugins()[0])
 
 
 def make_scorer(name: str, **options) -> Scorer:
-    """A scorer by registry name (``mlm``, ``causal``, ``embedding``, ``roomtype``, ``feedforward``)
-    with its options (``model=...``, ``temperature=...``, ``object_filter=...``, ...)."""
-    _import_all()
-    if name not in _REGISTRY:
-        raise L3MVNError(f"unknown language scorer {name!r}; valid: {', '.join(sorted(_REGISTRY))}")
+    """A scorer by registry name (``mlm``, ``causal``, ``embedding``, ``roomtype``, ``feedforward``, or a
+    plugin's) with its options (``model=...``, ``temperature=...``, ``object_filter=...``, ...)."""
+    plugins, problems = _plugins()
+    known = {**_built_in(), **plugins}
+    if name not in known:
+        why = f" ({problems[name]})" if name in problems else ""
+        raise L3MVNError(f"unknown language scorer {name!r}{why}; valid: {', '.join(scorer_names())}")
     try:
-        return _REGISTRY[name](**options)
+        return known[name](**options)
     except TypeError as exc:
         raise L3MVNError(f"bad options for scorer {name!r}: {exc}") from None
 
 
-def _import_all() -> None:
+def _built_in() -> dict[str, Callable[..., Scorer]]:
     from l3mvn.agent.language.scorers import causal, embedding, feedforward, mlm  # noqa: F401  (registers)
+
+    return _REGISTRY
+
+
+@cache
+def _plugins() -> tuple[dict[str, Callable[..., Scorer]], dict[str, str]]:
+    def accept(name: str, obj: object) -> str | None:
+        if not (isinstance(obj, type) and issubclass(obj, Scorer)):
+            return "is not a subclass of l3mvn.agent.language.scorers.Scorer"
+        obj.name = name
+        return None
+
+    found = discover(PLUGIN_GROUP, accept, frozenset(_built_in()))
+    return found.objects, found.problems
 
 
 __all__ = ["Scorer", "CacheInfo", "OBJECT_FILTERS", "register", "make_scorer", "scorer_names"]
