@@ -369,17 +369,14 @@ def _cmd_generate(args: argparse.Namespace) -> int:
 
 
 def _cmd_eval(args: argparse.Namespace) -> int:
-    """Run the episodes still to do, appending each row to ``--out`` as it finishes, then print the
-    summary of this run's valid rows (``--resume``: the file's too). ``--out`` is locked for the whole
-    run, its torn tail set aside first, and a row that fails ``row_problem`` is never summarised."""
-    from contextlib import closing
-
-    from l3mvn.run.eval.backends import run_local
-    from l3mvn.run.eval.job import EvalJob, is_error_row
-    from l3mvn.run.eval.metrics import format_summary, summarize
+    """Check the flags, run the evaluation (``l3mvn.run.eval.evaluation``), print the summary of this
+    run's valid rows (``--resume``: the file's too)."""
     from l3mvn.core.json_values import json_safe
-    from l3mvn.run.eval.results import ResultWriter, check_resumable, row_problem
     from l3mvn.core.writing import make_folder
+    from l3mvn.run.eval.evaluation import evaluate
+    from l3mvn.run.eval.job import EvalJob
+    from l3mvn.run.eval.metrics import format_summary, summarize
+    from l3mvn.run.eval.results import check_resumable
 
     if args.address and args.backend != "ray":
         raise L3MVNError("--address joins a Ray cluster: add --backend ray")
@@ -390,7 +387,6 @@ def _cmd_eval(args: argparse.Namespace) -> int:
             raise L3MVNError(f"unknown scorer {args.scorer!r}; valid scorers: {', '.join(scorer_names())}")
     cfg = _config(args, PolicyConfig(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise,
                                      head=args.head))
-    rule = cfg.task.success_rule
     if cfg.sim.backend == "habitat" and args.scenes is None:
         raise L3MVNError("--sim habitat runs scans: give --dataset with a habitat ObjectNav dataset and --scenes "
                          "with its scan root (`l3mvn export-hm3d` writes one from a procedural house)")
@@ -399,96 +395,35 @@ def _cmd_eval(args: argparse.Namespace) -> int:
                          seed=args.seed, config=cfg, policy=args.policy,
                          record_dir=args.record_dir if args.record or args.video else None, scenes=args.scenes)
     eset = job.load()
-    if rule in VIEW_POINT_RULES:
+    if cfg.task.success_rule in VIEW_POINT_RULES:
         from l3mvn.world.datasets.objectnav import geodesic_report
 
         print(geodesic_report(eset, cfg), file=sys.stderr)
     episodes = eset.episodes[: args.episodes] if args.episodes else eset.episodes
-    wanted = {ep.key for ep in episodes}
     if args.video:
         make_folder(args.video, "--video")
-    errors, interrupted = 0, False
-    unwritten: list[str] = []  # recordings and videos that did not reach the disk
-    with ResultWriter(args.out) as writer:
-        if writer.repair:
-            print(writer.repair, file=sys.stderr)
-        if args.resume:
-            previous = writer.previous(args.policy, job.config_hash, rule)
-            if report := previous.report(args.out):
-                print(report, file=sys.stderr)
-            results = {key: row for key, row in previous.rows.items() if key in wanted}
-        else:
-            results = {}
-        todo = [ep.key for ep in episodes if ep.key not in results]
-        print(f"{eset.name}/{eset.split} ({eset.format}): {len(episodes)} episodes, {len(todo)} to run, "
-              f"policy {args.policy}, "
-              f"rule {rule}, config {job.config_hash}", file=sys.stderr)
-        if args.backend == "ray":
-            from l3mvn.run.eval.ray_backend import run_ray
-
-            rows = run_ray(job, todo, args.address, args.workers)
-        else:
-            rows = run_local(job, todo, args.workers or 1)
-        try:
-            with closing(rows), _progress(len(todo)) as bar:
-                for row in rows:
-                    writer.write(row)
-                    bar.update(1)
-                    problem = row["error"] if is_error_row(row) else row_problem(row, rule)
-                    if problem:
-                        errors += 1
-                        bar.write(f"{row.get('key')}: error: {problem}")
-                        continue
-                    results[row["key"]] = row
-                    if row.get("recording_error"):
-                        unwritten.append(row["recording_error"])
-                        bar.write(f"{row['key']}: error: {row['recording_error']}")
-                    elif args.video and (problem := _episode_video(row, args)):
-                        unwritten.append(problem)
-                        bar.write(f"{row['key']}: no video: {problem}")
-                    done = list(results.values())
-                    bar.set_postfix_str(f"SR {sum(r['success'] for r in done) / len(done):.3f} "
-                                        f"SPL {sum(r['spl'] or 0 for r in done) / len(done):.3f}")
-        except KeyboardInterrupt:
-            interrupted = True  # the episodes finished so far still get their summary
-    if errors:
-        print(f"{errors} episodes failed (error rows in {args.out or 'the log above'}; --resume retries them)",
+    run = evaluate(job, episodes, out=args.out, resume=args.resume, backend=args.backend, workers=args.workers,
+                   address=args.address, video_dir=args.video, stream=sys.stderr)
+    if run.errors:
+        print(f"{run.errors} episodes failed (error rows in {args.out or 'the log above'}; --resume retries them)",
               file=sys.stderr)
-    if not results:
-        if interrupted:
+    if not run.rows:
+        if run.interrupted:
             raise KeyboardInterrupt
         raise L3MVNError("no episodes were run")
-    if interrupted:
-        print(f"interrupted: summary of the {len(results)} of {len(episodes)} episodes finished "
+    if run.interrupted:
+        print(f"interrupted: summary of the {len(run.rows)} of {len(episodes)} episodes finished "
               f"(saved in {args.out or 'no file: add --out'}; --resume runs the rest)", file=sys.stderr)
-    summary = summarize(list(results.values()))
+    summary = summarize(list(run.rows.values()))
     summary["dataset"] = {"name": eset.name, "split": eset.split, "format": eset.format}
     print(f"dataset: {eset.name}/{eset.split}, format {eset.format}")
     print(format_summary(summary))
     if args.json:
         print(json.dumps(json_safe(summary), sort_keys=True))
-    if unwritten and not interrupted:
-        raise L3MVNError(f"{len(unwritten)} recordings or videos were not written whole, the results are kept "
-                         f"(first: {unwritten[0]})")
-    return 130 if interrupted else 0
-
-
-def _episode_video(row: dict, args: argparse.Namespace) -> str | None:
-    """``eval --video``: the finished episode's recording as an MP4 (a local run's recordings only);
-    why it could not be written, or None."""
-    from l3mvn.run.eval.result_videos import export_result_video
-
-    try:
-        export_result_video(row, args.record_dir, args.video)
-    except L3MVNError as exc:
-        return one_line(exc)
-    return None
-
-
-def _progress(total: int):
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="ep", file=sys.stderr, dynamic_ncols=True, mininterval=1.0)
+    if run.unwritten and not run.interrupted:
+        raise L3MVNError(f"{len(run.unwritten)} recordings or videos were not written whole, the results are kept "
+                         f"(first: {run.unwritten[0]})")
+    return 130 if run.interrupted else 0
 
 
 def _cmd_language(args: argparse.Namespace) -> int:
