@@ -26,9 +26,8 @@ from l3mvn.core.config import Config
 from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.run.eval.job import EvalJob
 from l3mvn.run.recording.catalogue import recording_path, unique_tag
-from l3mvn.run.recording.video import (
-    FONT, PANEL_BG, TEXT_RGB, RecordedEpisode, VideoOptions, fit_text, frames, read_episode,
-)
+from l3mvn.run.recording.drawing import FONT, PANEL_BG, TEXT_RGB, VideoOptions, fit_text, frames
+from l3mvn.run.recording.recorded import RecordedEpisode, read_episode
 from l3mvn.run.registry import ALIASES, DIRECT_POLICIES, POLICY_NAMES, TELEOP
 
 PICTURE_HEIGHT = 400  # pixels of a side's map panel: the map is what is compared, so it leads

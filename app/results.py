@@ -21,7 +21,8 @@ from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.run.eval.job import EvalJob
 from l3mvn.run.eval.results import episode_lines
 from l3mvn.run.recording.catalogue import find_recording, recording_path, unique_tag
-from l3mvn.run.recording.video import VideoOptions, frames, read_episode
+from l3mvn.run.recording.drawing import VideoOptions, frames
+from l3mvn.run.recording.recorded import read_episode
 
 ALL, FAILURES, SUCCESSES = "all", "failures", "successes"
 SORT_KEYS = ("row", "scene", "goal", "success", "spl", "dtg", "steps", "failure", "coverage")

@@ -21,16 +21,21 @@ from l3mvn.run.recording import (
     recording_path, run_replay,
 )
 from l3mvn.run.recording.catalogue import unique_tag
+from l3mvn.run.recording.entities import (
+    CAMERA, CAMERA_DEPTH, CAMERA_RGB, CAMERA_SEMANTIC, EPISODE, LOG_DECISIONS, LOG_EPISODE, MAP, MAP_AGENT,
+    MAP_COLLISION_MARKS, MAP_FRONTIER_CELLS, MAP_FRONTIERS, MAP_GOAL, MAP_SEMANTIC, MAP_TARGET, MAP_TRAJECTORY,
+    METRICS_CHOSEN_FRONTIER, METRICS_FRONTIER_SCORES, METRICS_FRONTIERS, METRICS_GROUND_TRUTH, METRICS_TIMINGS_MS,
+    POINTS_LABELS, POINTS_POSITIONS, TEXT_LOG, WORLD_AGENT, WORLD_GOAL, WORLD_TRAJECTORY, reader_path,
+)
 from l3mvn.run.recording.layout import LABELLED_FRONTIERS
 from l3mvn.run.runner import Runner
 from l3mvn.core.types import Action
 
 MAX_STEPS = 15
-CAMERA = {"/camera", "/camera/rgb", "/camera/depth", "/camera/semantic"}
-ALWAYS = CAMERA | {"/world/agent", "/world/trajectory", "/metrics/ground_truth", "/metrics/timings_ms",
-                   "/log/decisions", "/log/episode", "/episode"}
-MAP = {"/map", "/map/semantic", "/map/trajectory", "/map/agent", "/map/goal", "/map/frontiers",
-       "/map/frontier_cells", "/metrics/frontiers", "/world/goal"}
+ALWAYS = {reader_path(e) for e in (CAMERA, CAMERA_RGB, CAMERA_DEPTH, CAMERA_SEMANTIC, WORLD_AGENT, WORLD_TRAJECTORY,
+                                    METRICS_GROUND_TRUTH, METRICS_TIMINGS_MS, LOG_DECISIONS, LOG_EPISODE, EPISODE)}
+MAPPED = {reader_path(e) for e in (MAP, MAP_SEMANTIC, MAP_TRAJECTORY, MAP_AGENT, MAP_GOAL, MAP_FRONTIERS,
+                                   MAP_FRONTIER_CELLS, METRICS_FRONTIERS, WORLD_GOAL)}
 
 
 pytestmark = pytest.mark.usefixtures("strict_rerun")  # a bad log call fails the test (conftest)
@@ -60,7 +65,7 @@ def _values(path, entity, column):
     """Every value of one component column of one entity, read with rerun's own reader."""
     out = []
     for chunk in RrdReader(path).stream():
-        if chunk.entity_path == entity and column in chunk.to_record_batch().schema.names:
+        if chunk.entity_path == reader_path(entity) and column in chunk.to_record_batch().schema.names:
             out += [v for row in chunk.to_record_batch().column(column).to_pylist() for v in (row or [])]
     return out
 
@@ -72,10 +77,10 @@ def test_oracle_episode_records_camera_world_metrics_and_one_row_per_step_withou
     summary = read_recording(recorder.path)
     assert summary.application_id == "l3mvn"
     assert ALWAYS <= set(summary.entity_paths)
-    assert not any(p.startswith("/map") for p in summary.entity_paths)  # no map: no map entities
+    assert not any(p.startswith(reader_path(MAP)) for p in summary.entity_paths)  # no map: no map entities
     assert result.steps == MAX_STEPS
     assert summary.steps == tuple(range(MAX_STEPS + 1))  # the reset event is step 0
-    decisions = _values(recorder.path, "/log/decisions", "TextLog:text")
+    decisions = _values(recorder.path, LOG_DECISIONS, TEXT_LOG)
     assert len(decisions) == MAX_STEPS
     assert all(d.split()[0] in {a.name.lower() for a in Action} for d in decisions)
 
@@ -86,29 +91,30 @@ def test_map_agent_episode_records_map_frontiers_goal_and_trajectory(tiny_scene,
 
     assert recorder.errors == 0
     summary = read_recording(recorder.path)
-    assert ALWAYS | MAP <= set(summary.entity_paths)
+    assert ALWAYS | MAPPED <= set(summary.entity_paths)
     assert summary.steps == tuple(range(result.steps + 1))
     assert open_recording(recorder.path).blueprints()  # the default layout travels with the file
     assert recorder.path == tmp_path / "tiny-ds_Tiny_0_frontier.rrd"
-    labels = _values(recorder.path, "/map/frontiers", "Points2D:labels")
+    labels = _values(recorder.path, MAP_FRONTIERS, POINTS_LABELS)
     assert labels and all(re.fullmatch(r"(★?F\d+ (fused|LLM|CU) \d\.\d\d)?", label) for label in labels)
     assert any(label.startswith("★") for label in labels)  # the chosen frontier is marked
-    assert len(_values(recorder.path, "/map/frontiers", "score_cu")) == len(labels)  # every score on hover
+    assert len(_values(recorder.path, MAP_FRONTIERS, "score_cu")) == len(labels)  # every score on hover
 
 
 def test_the_agents_collision_marks_are_recorded_once_per_change_at_their_cells(tiny_scene, tmp_path, monkeypatch):
-    """What closed a passage the map shows free (Forkland/0/6) must be visible in a replay too."""
+    """The cells that closed a passage the map shows free must be visible in a replay too."""
     from l3mvn.agent.planning import LocalPlanner
 
     marks = np.array([[480, 484], [481, 484], [482, 485]], np.int32)  # beside the start, the map centre
     monkeypatch.setattr(LocalPlanner, "collision_cells", property(lambda self: marks))
     recorder, _, _ = _record(Runner(CONFIG), tiny_scene, "frontier", tmp_path)
     assert recorder.errors == 0
-    positions = _rows(recorder.path, "/map/collision_marks", "Points2D:positions")
+    positions = _rows(recorder.path, MAP_COLLISION_MARKS, POINTS_POSITIONS)
     assert len(positions) == 1  # the same array every step: written once
     assert np.allclose(positions[0], marks[:, ::-1] + 0.5)
     # The exported video draws them too: the last frame holds the marks' colour, and only because of them.
-    from l3mvn.run.recording.video import VideoOptions, frames, read_episode
+    from l3mvn.run.recording.drawing import VideoOptions, frames
+    from l3mvn.run.recording.recorded import read_episode
     from l3mvn.run.viz import COLLISION_RGB
 
     episode = read_episode(recorder.path)
@@ -125,7 +131,7 @@ def _rows(path, entity, column):
     out = []
     for chunk in RrdReader(path).stream():
         batch = chunk.to_record_batch()
-        if chunk.entity_path == entity and column in batch.schema.names:
+        if chunk.entity_path == reader_path(entity) and column in batch.schema.names:
             steps = batch.column("step").to_pylist() if "step" in batch.schema.names else [None] * batch.num_rows
             out += [(s, v) for s, v in zip(steps, batch.column(column).to_pylist()) if v is not None]
     return [v for _, v in sorted(out, key=lambda sv: -1 if sv[0] is None else sv[0])]
@@ -134,27 +140,27 @@ def _rows(path, entity, column):
 def test_only_the_best_three_frontiers_and_the_chosen_one_are_labelled_and_scores_are_series(tiny_scene, tmp_path):
     runner = Runner(CONFIG.replace(agent=AgentConfig(look_around_steps=2)))
     recorder, _, _ = _record(runner, tiny_scene, "cost-utility", tmp_path)
-    rows = zip(_rows(recorder.path, "/map/frontiers", "Points2D:labels"),
-               _rows(recorder.path, "/map/frontiers", "score_cu"), _rows(recorder.path, "/map/frontiers", "chosen"))
+    rows = zip(_rows(recorder.path, MAP_FRONTIERS, POINTS_LABELS),
+               _rows(recorder.path, MAP_FRONTIERS, "score_cu"), _rows(recorder.path, MAP_FRONTIERS, "chosen"))
     for labels, scores, chosen in rows:
         best = set(np.argsort(-np.array(scores), kind="stable")[:LABELLED_FRONTIERS].tolist())
         assert {i for i, label in enumerate(labels) if label} == best | {i for i, c in enumerate(chosen) if c}
-    names = _rows(recorder.path, "/metrics/frontier_scores", "SeriesLines:names")[-1]
-    series = _rows(recorder.path, "/metrics/frontier_scores", "Scalars:scalars")
-    frontiers = _rows(recorder.path, "/metrics/frontiers", "Scalars:scalars")
+    names = _rows(recorder.path, METRICS_FRONTIER_SCORES, "SeriesLines:names")[-1]
+    series = _rows(recorder.path, METRICS_FRONTIER_SCORES, "Scalars:scalars")
+    frontiers = _rows(recorder.path, METRICS_FRONTIERS, "Scalars:scalars")
     assert names[:2] == ["F0", "F1"] and series
     skipped = frontiers[: len(frontiers) - len(series)]  # before the first frontier there is no line to log
     assert all(count == 0 for (count,) in skipped)
     for row, (count,) in zip(series, frontiers[len(skipped):]):  # a value per frontier of the step, gaps for others
         assert sum(np.isfinite(v) for v in row) == count
-    assert _rows(recorder.path, "/metrics/chosen_frontier", "SeriesLines:names")[-1] == ["LLM", "CU", "fused"]
+    assert _rows(recorder.path, METRICS_CHOSEN_FRONTIER, "SeriesLines:names")[-1] == ["LLM", "CU", "fused"]
 
 
 def test_the_target_is_boxed_on_the_map_and_the_view_is_fitted_to_the_mapped_area(tiny_scene, tmp_path):
     runner = Runner(CONFIG.replace(sim=dataclasses.replace(CONFIG.sim, max_steps=60),
                                    agent=AgentConfig(look_around_steps=2)))
     recorder, _, _ = _record(runner, tiny_scene, "frontier", tmp_path)
-    boxes = _rows(recorder.path, "/map/target", "Boxes2D:labels")
+    boxes = _rows(recorder.path, MAP_TARGET, "Boxes2D:labels")
     assert boxes and boxes[-1][0] == "target: toilet"
     ranges = [c for bp in open_recording(recorder.path).blueprints()
               for chunk in RrdReader(recorder.path).stream(store=bp)
@@ -199,17 +205,17 @@ def test_a_failing_event_is_counted_not_raised_and_the_file_still_closes(runner,
 
 
 def test_recording_path_follows_the_pattern_and_parses_back(tmp_path):
-    path = recording_path(tmp_path / "recordings", "/data/gibson_semexp", "Collierville", 7, "cost-utility")
-    assert path == tmp_path / "recordings" / "gibson-semexp_Collierville_7_cost-utility.rrd"
-    assert parse_recording_name(path) == ("gibson-semexp", "Collierville", 7, "cost-utility", None)
+    path = recording_path(tmp_path / "recordings", "/data/gibson_semexp", "Tiny", 7, "cost-utility")
+    assert path == tmp_path / "recordings" / "gibson-semexp_Tiny_7_cost-utility.rrd"
+    assert parse_recording_name(path) == ("gibson-semexp", "Tiny", 7, "cost-utility", None)
     assert parse_recording_name(tmp_path / "holiday.rrd") is None
     with pytest.raises(L3MVNError, match="cannot name a recording"):
         recording_path(tmp_path, "ds", "___", 1, "oracle")
     tag = unique_tag("rerun")
     assert re.fullmatch(r"rerun-\d{8}T\d{6}Z-\d+-[0-9a-f]{6}", tag) and tag != unique_tag("rerun")
-    tagged = recording_path(tmp_path, "ds", "Collierville", 7, "oracle", tag)
-    assert tagged.name == f"ds_Collierville_7_oracle_{tag}.rrd"
-    assert parse_recording_name(tagged) == ("ds", "Collierville", 7, "oracle", tag)
+    tagged = recording_path(tmp_path, "ds", "Tiny", 7, "oracle", tag)
+    assert tagged.name == f"ds_Tiny_7_oracle_{tag}.rrd"
+    assert parse_recording_name(tagged) == ("ds", "Tiny", 7, "oracle", tag)
 
 
 def test_one_path_has_one_writer_at_a_time(tmp_path):

@@ -11,7 +11,9 @@ from l3mvn.core.config import AgentConfig, Config, SimConfig
 from l3mvn.run.events import EventBus
 from l3mvn.agent.language import GOALS
 from l3mvn.run.recording import Recorder
-from l3mvn.run.recording.layout import LANGUAGE_BY_GOAL, LANGUAGE_CHOSEN
+from l3mvn.run.recording.entities import (
+    LANGUAGE_CHOSEN, LANGUAGE_CHOSEN_METRES, LOG_FUSION, METRICS_LANGUAGE, TEXT_LOG, language_by_goal, reader_path,
+)
 from l3mvn.run.runner import Runner
 from l3mvn.core.types import Pose
 from l3mvn.world.episode import Episode
@@ -27,7 +29,7 @@ def _by_step(path, entity, column) -> dict[int, list]:
     out = {}
     for chunk in RrdReader(path).stream():
         batch = chunk.to_record_batch()
-        if chunk.entity_path == entity and column in batch.schema.names and "step" in batch.schema.names:
+        if chunk.entity_path == reader_path(entity) and column in batch.schema.names and "step" in batch.schema.names:
             for step, value in zip(batch.column("step").to_pylist(), batch.column(column).to_pylist()):
                 if value is not None:
                     out[step] = value
@@ -35,7 +37,7 @@ def _by_step(path, entity, column) -> dict[int, list]:
 
 
 def _static(path, entity, column) -> list:
-    return [v for chunk in RrdReader(path).stream() if chunk.entity_path == entity
+    return [v for chunk in RrdReader(path).stream() if chunk.entity_path == reader_path(entity)
             for v in (chunk.to_record_batch().column(column).to_pylist()
                       if column in chunk.to_record_batch().schema.names else []) if v is not None]
 
@@ -56,20 +58,20 @@ def test_the_chosen_frontiers_per_goal_scores_and_the_fusion_line_are_recorded_p
               if ev.decision is not None and ev.decision.chosen_frontier is not None and ev.decision.frontiers}
     assert chosen, "the agent never chose a frontier"
 
-    assert _static(path, f"/{LANGUAGE_CHOSEN}", "SeriesLines:names")[-1] == list(GOALS)
-    rows = _by_step(path, f"/{LANGUAGE_CHOSEN}", "Scalars:scalars")
+    assert _static(path, LANGUAGE_CHOSEN, "SeriesLines:names")[-1] == list(GOALS)
+    rows = _by_step(path, LANGUAGE_CHOSEN, "Scalars:scalars")
     for step, frontier in chosen.items():
         assert rows[step] == pytest.approx([frontier.llm_scores[g] for g in GOALS])
     gaps = [step for step, row in rows.items() if step not in chosen]  # a goal that is not a frontier: a gap
     assert all(all(math.isnan(v) for v in rows[s]) for s in gaps)
 
-    toilet = _by_step(path, f"/{LANGUAGE_BY_GOAL}/toilet", "Scalars:scalars")
-    names = _static(path, f"/{LANGUAGE_BY_GOAL}/toilet", "SeriesLines:names")[-1]
+    toilet = _by_step(path, language_by_goal("toilet"), "Scalars:scalars")
+    names = _static(path, language_by_goal("toilet"), "SeriesLines:names")[-1]
     step, frontier = next(iter(chosen.items()))
     assert toilet[step][names.index(f"F{frontier.id}")] == pytest.approx(frontier.llm_scores["toilet"])
-    assert f"/{LANGUAGE_BY_GOAL}/potted_plant" in {c.entity_path for c in RrdReader(path).stream()}
+    assert reader_path(language_by_goal("potted plant")) in {c.entity_path for c in RrdReader(path).stream()}
 
-    lines = {step: text for step, (text,) in _by_step(path, "/log/fusion", "TextLog:text").items()}
+    lines = {step: text for step, (text,) in _by_step(path, LOG_FUSION, TEXT_LOG).items()}
     first = min(chosen)
     assert lines[first] == events[first].decision.frontiers[0].fusion.describe()
     assert lines[first].startswith("bound B = [0.15, 0.30]; max S_LLM")
@@ -79,7 +81,7 @@ def test_the_chosen_frontiers_per_goal_scores_and_the_fusion_line_are_recorded_p
     assert after.decision.goal_kind != "frontier"
     assert lines[after.step] == f"no frontier choice in force: the goal is {str(after.decision.goal_kind)!r}, not a frontier"
     assert max(lines) == after.step  # and nothing more while no frontier is chosen again
-    assert not _static(path, f"/{LANGUAGE_CHOSEN}_metres", "SeriesLines:names")  # the room scorer gives no metres
+    assert not _static(path, LANGUAGE_CHOSEN_METRES, "SeriesLines:names")  # the room scorer gives no metres
 
 
 def test_a_distance_head_records_the_chosen_frontiers_expected_metres_to_each_goal(tiny_scene, tmp_path):
@@ -88,14 +90,14 @@ def test_a_distance_head_records_the_chosen_frontiers_expected_metres_to_each_go
     chosen = {ev.step: ev.decision.frontiers[ev.decision.chosen_frontier] for ev in events
               if ev.decision is not None and ev.decision.chosen_frontier is not None and ev.decision.frontiers}
     assert chosen
-    assert _static(path, f"/{LANGUAGE_CHOSEN}_metres", "SeriesLines:names")[-1] == list(GOALS)
-    rows = _by_step(path, f"/{LANGUAGE_CHOSEN}_metres", "Scalars:scalars")
+    assert _static(path, LANGUAGE_CHOSEN_METRES, "SeriesLines:names")[-1] == list(GOALS)
+    rows = _by_step(path, LANGUAGE_CHOSEN_METRES, "Scalars:scalars")
     for step, frontier in chosen.items():
         assert rows[step] == pytest.approx([frontier.expected_m[g] for g in GOALS])
-    assert _by_step(path, "/log/fusion", "TextLog:text")[min(chosen)][0].startswith("expected: least metres")
+    assert _by_step(path, LOG_FUSION, TEXT_LOG)[min(chosen)][0].startswith("expected: least metres")
 
 
 def test_a_policy_without_language_records_no_language_series(tiny_scene, tmp_path):
     path, _ = _record(tiny_scene, tmp_path, "cost-utility")
     entities = {c.entity_path for c in RrdReader(path).stream()}
-    assert not any(e.startswith("/metrics/language") or e == "/log/fusion" for e in entities)
+    assert not any(e.startswith(reader_path(METRICS_LANGUAGE)) or e == reader_path(LOG_FUSION) for e in entities)

@@ -18,7 +18,9 @@ from l3mvn.core.errors import L3MVNError
 from l3mvn.run.events import EventBus
 from l3mvn.run.recording import Recorder, read_recording
 from l3mvn.run.eval.result_videos import add_export_arguments, export_result_video, result_video_name, run_export
-from l3mvn.run.recording.video import PANEL_BG, VideoOptions, export_video, frames, read_episode
+from l3mvn.run.recording.drawing import PANEL_BG, VideoOptions, frames
+from l3mvn.run.recording.recorded import read_episode
+from l3mvn.run.recording.video import export_video
 from l3mvn.run.runner import Runner
 from l3mvn.world.scenes.procedural import generate_house
 
@@ -273,7 +275,7 @@ def test_malformed_result_lines_are_named_and_skipped(recorded, tmp_path, capsys
 def test_a_map_label_beside_the_panel_edge_stays_whole_inside_it(at):
     """A target at the map's left edge read "arget: toilet": the label's box now lies inside the panel,
     and beside the point when there is room, clear of labels already placed."""
-    from l3mvn.run.recording.video import _place_label
+    from l3mvn.run.recording.drawing import _place_label
 
     img = np.zeros((120, 320, 3), np.uint8)
     placed = [(at[0] - 5, at[1] - 5, at[0] + 5, at[1] + 5)]

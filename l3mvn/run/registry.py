@@ -182,6 +182,18 @@ def policy_spec(name: str) -> PolicySpec:
     return specs[name]
 
 
+def names_where(test: Callable[[PolicySpec], bool]) -> tuple[str, ...]:
+    """The names of the policies whose spec passes ``test`` (e.g. the language ones, for a message)."""
+    return tuple(name for name, spec in _registry()[0].items() if test(spec))
+
+
+def scorer_of(name: str, options: PolicyConfig) -> str | None:
+    """The language scorer a policy ``name`` built with ``options`` scores with: ``--scorer`` when given,
+    else the policy's own default; None for a policy that reads no language model."""
+    language = policy_spec(name).language
+    return None if language is None else options.scorer or language.scorer
+
+
 def check_policy(name: str) -> str:
     policy_spec(name)
     return name

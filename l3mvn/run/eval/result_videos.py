@@ -14,7 +14,8 @@ from pathlib import Path
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.eval.results import episode_lines
 from l3mvn.run.recording.catalogue import find_recording, recording_name_part
-from l3mvn.run.recording.video import VideoOptions, VideoResult, export_video
+from l3mvn.run.recording.drawing import VideoOptions
+from l3mvn.run.recording.video import VideoResult, export_video
 
 
 def result_video_name(row: dict, *, with_policy: bool = False) -> str:

@@ -17,6 +17,7 @@ from pathlib import Path
 from rerun.chunk import RrdReader
 
 from l3mvn.core.errors import L3MVNError, first_line
+from l3mvn.run.recording.entities import PROPERTIES, reader_path
 
 APPLICATION_ID = "l3mvn"
 DEFAULT_RECORD_DIR = "recordings"  # where recordings go when no folder is named (eval, serve)
@@ -204,7 +205,7 @@ def _summarise(reader: RrdReader, path: Path) -> RecordingSummary:
                 steps.update(chunk.to_record_batch().column(TIMELINE).to_pylist())
     except (RuntimeError, ValueError, OSError) as exc:
         raise L3MVNError(f"{path} is not a readable rerun recording: {first_line(exc)}") from None
-    entities.discard("/__properties")
+    entities.discard(reader_path(PROPERTIES))
     return RecordingSummary(path, entry.application_id, entry.recording_id, tuple(sorted(entities)),
                             tuple(sorted(s for s in steps if s is not None)))
 

@@ -13,6 +13,11 @@ from dataclasses import dataclass
 import numpy as np
 import rerun.blueprint as rrb
 
+from l3mvn.run.recording.entities import (
+    CAMERA_DEPTH, CAMERA_RGB, CAMERA_SEMANTIC, EPISODE, LANGUAGE_CHOSEN, LOG, MAP, METRICS_CHOSEN_FRONTIER,
+    METRICS_FRONTIER_SCORES, METRICS_FRONTIERS, METRICS_GROUND_TRUTH, METRICS_TIMINGS_MS, WORLD,
+)
+
 # The colours of a recording, shared by the recorder and the videos made from it.
 AGENT_RGB = (30, 120, 255)
 GOAL_RGB = (255, 0, 200)  # the long-term goal
@@ -22,8 +27,6 @@ HIGH_SCORE_RGB = np.array([40, 190, 80], np.float32)
 LABELLED_FRONTIERS = 3  # only the best frontiers (and the chosen one) carry a label: more would overlap
 MIN_VIEW_M = 6.0  # a fitted map view is never narrower: the first steps map a thin cone
 VIEW_MARGIN = 0.1  # of the mapped extent, on every side
-LANGUAGE_CHOSEN = "metrics/language/chosen"  # the chosen frontier's p(goal), a line per goal
-LANGUAGE_BY_GOAL = "metrics/language/by_goal"  # /<goal>: p(goal) of every frontier, a line per F<id>
 
 
 def score_colors(scores: np.ndarray) -> np.ndarray:
@@ -62,27 +65,27 @@ def default_blueprint(view: MapBounds | None = None) -> rrb.Blueprint:
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(
-                rrb.Spatial2DView(name="Map", origin="map", visual_bounds=bounds),
+                rrb.Spatial2DView(name="Map", origin=MAP, visual_bounds=bounds),
                 rrb.Tabs(
-                    rrb.TimeSeriesView(name="Frontier scores", origin="metrics/frontier_scores"),
-                    rrb.TimeSeriesView(name="Chosen frontier", origin="metrics/chosen_frontier"),
+                    rrb.TimeSeriesView(name="Frontier scores", origin=METRICS_FRONTIER_SCORES),
+                    rrb.TimeSeriesView(name="Chosen frontier", origin=METRICS_CHOSEN_FRONTIER),
                     rrb.TimeSeriesView(name="Language (chosen)", origin=LANGUAGE_CHOSEN),
-                    rrb.TimeSeriesView(name="Ground truth", origin="metrics/ground_truth"),
-                    rrb.TimeSeriesView(name="Frontiers", origin="metrics/frontiers"),
-                    rrb.TimeSeriesView(name="Timings (ms)", origin="metrics/timings_ms"),
+                    rrb.TimeSeriesView(name="Ground truth", origin=METRICS_GROUND_TRUTH),
+                    rrb.TimeSeriesView(name="Frontiers", origin=METRICS_FRONTIERS),
+                    rrb.TimeSeriesView(name="Timings (ms)", origin=METRICS_TIMINGS_MS),
                 ),
                 row_shares=[3, 1],
             ),
             rrb.Vertical(
-                rrb.Spatial2DView(name="RGB", origin="camera/rgb"),
+                rrb.Spatial2DView(name="RGB", origin=CAMERA_RGB),
                 rrb.Horizontal(
-                    rrb.Spatial2DView(name="Depth", origin="camera/depth"),
-                    rrb.Spatial2DView(name="Semantic", origin="camera/semantic"),
+                    rrb.Spatial2DView(name="Depth", origin=CAMERA_DEPTH),
+                    rrb.Spatial2DView(name="Semantic", origin=CAMERA_SEMANTIC),
                 ),
                 rrb.Tabs(
-                    rrb.TextLogView(name="Decisions", origin="log"),
-                    rrb.TextDocumentView(name="Episode", origin="episode"),
-                    rrb.Spatial3DView(name="World", origin="world"),
+                    rrb.TextLogView(name="Decisions", origin=LOG),
+                    rrb.TextDocumentView(name="Episode", origin=EPISODE),
+                    rrb.Spatial3DView(name="World", origin=WORLD),
                 ),
                 row_shares=[4, 2, 3],
             ),

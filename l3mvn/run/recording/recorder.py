@@ -18,8 +18,15 @@ from scipy import ndimage as ndi
 from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.run.events import EventBus, StepEvent
 from l3mvn.run.recording.catalogue import APPLICATION_ID, TIMELINE, recording_gap, recording_path
+from l3mvn.run.recording.entities import (
+    CAMERA, CAMERA_DEPTH, CAMERA_RGB, CAMERA_RGB_TARGET, CAMERA_SEMANTIC, CAMERA_SEMANTIC_TARGET, EPISODE,
+    LANGUAGE_CHOSEN, LANGUAGE_CHOSEN_METRES, LOG_DECISIONS, LOG_EPISODE, LOG_FUSION, LOG_LANGUAGE, MAP, MAP_AGENT,
+    MAP_COLLISION_MARKS, MAP_FRONTIER_CELLS, MAP_FRONTIERS, MAP_GOAL, MAP_SEMANTIC, MAP_SHORT_TERM_GOAL, MAP_TARGET,
+    MAP_TRAJECTORY, METRICS_CHOSEN_FRONTIER, METRICS_FRONTIER_SCORES, METRICS_FRONTIERS, METRICS_GROUND_TRUTH,
+    METRICS_TIMINGS_MS, WORLD_AGENT, WORLD_AGENT_BODY, WORLD_GOAL, WORLD_TRAJECTORY, language_by_goal,
+)
 from l3mvn.run.recording.layout import (
-    AGENT_RGB, GOAL_RGB, LABELLED_FRONTIERS, LANGUAGE_BY_GOAL, LANGUAGE_CHOSEN, TARGET_RGB, MapBounds,
+    AGENT_RGB, GOAL_RGB, LABELLED_FRONTIERS, TARGET_RGB, MapBounds,
     default_blueprint, map_view_bounds, score_colors,
 )
 from l3mvn.world.episode import Episode
@@ -43,7 +50,7 @@ _MAP_CLASSES = (
 
 
 class Recorder:
-    """A StepEvent subscriber writing one episode to ``path`` (see the module docstring for the tree).
+    """A StepEvent subscriber writing one episode to ``path`` (``entities`` describes the tree).
 
     It never raises into the loop: a failing step is logged once and skipped. The file is finished
     (flushed, footer written) on the ``done`` event or ``close()``; later events are ignored.
@@ -86,7 +93,7 @@ class Recorder:
         self._view: MapBounds | None = None
         self._resolution_m = 0.0
         self._last_target: tuple = ()
-        self._last_fusion = None  # the Fusion record last written to log/fusion
+        self._last_fusion = None  # the Fusion record last written to LOG_FUSION
         self._last_marks: np.ndarray | None = None  # the collision marks last written (a new array per change)
         self.log_ms: list[float] = []  # this recorder's own cost per event, for budgets and benchmarks
 
@@ -190,11 +197,11 @@ class Recorder:
             self._started = True
         if ev.segment != self._segment:
             self._segment = ev.segment
-            rec.log("log/episode", rr.TextLog(f"segment {ev.segment}: target changed to {ev.goal}", level="WARN"))
+            rec.log(LOG_EPISODE, rr.TextLog(f"segment {ev.segment}: target changed to {ev.goal}", level="WARN"))
 
-        rec.log("camera/rgb", rr.Image(obs.rgb))
-        rec.log("camera/depth", rr.DepthImage(obs.depth, meter=1.0, colormap="turbo"))
-        rec.log("camera/semantic", rr.SegmentationImage(_small_ids(obs.semantic)))
+        rec.log(CAMERA_RGB, rr.Image(obs.rgb))
+        rec.log(CAMERA_DEPTH, rr.DepthImage(obs.depth, meter=1.0, colormap="turbo"))
+        rec.log(CAMERA_SEMANTIC, rr.SegmentationImage(_small_ids(obs.semantic)))
         self._log_camera_target(obs, ev.goal)
 
         self._log_world(ev)
@@ -214,7 +221,7 @@ class Recorder:
         classes = [rr.ClassDescription(info=rr.AnnotationInfo(id=0, label="background", color=BACKGROUND_RGB))]
         classes += [rr.ClassDescription(info=rr.AnnotationInfo(id=k + 1, label=name, color=tuple(palette[k + 1])))
                     for k, name in enumerate(categories)]
-        self._rec.log("camera", rr.AnnotationContext(classes), static=True)
+        self._rec.log(CAMERA, rr.AnnotationContext(classes), static=True)
         self._camera_categories = categories
 
     def _log_map_context(self, names: tuple[str, ...]) -> None:
@@ -224,7 +231,7 @@ class Recorder:
                    for i, (label, rgb) in enumerate(_MAP_CLASSES)]
         classes += [rr.ClassDescription(info=rr.AnnotationInfo(id=n + k, label=name, color=tuple(palette[k + 1])))
                     for k, name in enumerate(names)]
-        self._rec.log("map", rr.AnnotationContext(classes), static=True)
+        self._rec.log(MAP, rr.AnnotationContext(classes), static=True)
         self._map_categories = names
 
     def _log_episode_card(self, ev: StepEvent) -> None:
@@ -232,20 +239,20 @@ class Recorder:
         text = (f"# {m['scene']} episode {m['episode_id']}\n\n"
                 f"* dataset: `{m['dataset']}`\n* policy: `{m['policy']}`\n* goal: **{ev.goal}**\n"
                 f"* episode key: `{ev.episode_key}`\n")
-        self._rec.log("episode", rr.TextDocument(text, media_type="text/markdown"))
-        self._rec.log("log/episode", rr.TextLog(f"episode {ev.episode_key}: find {ev.goal} ({m['policy']})"))
+        self._rec.log(EPISODE, rr.TextDocument(text, media_type="text/markdown"))
+        self._rec.log(LOG_EPISODE, rr.TextLog(f"episode {ev.episode_key}: find {ev.goal} ({m['policy']})"))
 
     def _log_world(self, ev: StepEvent) -> None:
         rec, pose = self._rec, ev.pose
         if not self._world_xyz:
-            rec.log("world/agent/body", rr.Arrows3D(origins=[[0.0, 0.0, 0.3]], vectors=[[0.4, 0.0, 0.0]],
-                                                    colors=[AGENT_RGB]), static=True)
-        rec.log("world/agent", rr.Transform3D(translation=[pose.x, pose.y, 0.0],
-                                              rotation=rr.RotationAxisAngle(axis=[0, 0, 1], radians=pose.heading)))
+            rec.log(WORLD_AGENT_BODY, rr.Arrows3D(origins=[[0.0, 0.0, 0.3]], vectors=[[0.4, 0.0, 0.0]],
+                                                  colors=[AGENT_RGB]), static=True)
+        rec.log(WORLD_AGENT, rr.Transform3D(translation=[pose.x, pose.y, 0.0],
+                                            rotation=rr.RotationAxisAngle(axis=[0, 0, 1], radians=pose.heading)))
         here = (pose.x, pose.y, 0.05)
         if not self._world_xyz or self._world_xyz[-1] != here:
             self._world_xyz.append(here)
-            rec.log("world/trajectory", rr.LineStrips3D([self._world_xyz], colors=[AGENT_RGB]))
+            rec.log(WORLD_TRAJECTORY, rr.LineStrips3D([self._world_xyz], colors=[AGENT_RGB]))
 
     def _log_metrics(self, ev: StepEvent) -> None:
         now = time.perf_counter()
@@ -256,25 +263,25 @@ class Recorder:
         if ev.decision is not None:
             timings.update(ev.decision.timings_ms)
             if ev.decision.map is not None:
-                self._rec.log("metrics/frontiers", rr.Scalars([float(len(ev.decision.frontiers))]))
+                self._rec.log(METRICS_FRONTIERS, rr.Scalars([float(len(ev.decision.frontiers))]))
                 self._log_frontier_scores(ev.decision)
-        self._log_series("metrics/ground_truth", ev.ground_truth)
-        self._log_series("metrics/timings_ms", timings)
+        self._log_series(METRICS_GROUND_TRUTH, ev.ground_truth)
+        self._log_series(METRICS_TIMINGS_MS, timings)
 
     def _log_frontier_scores(self, d) -> None:
         """Each frontier's score (the one its colour shows) as a line named like its map label, F<id>,
         and the chosen frontier's LLM, CU and fused scores: how the decision margin evolves."""
-        self._log_series("metrics/frontier_scores", {f"F{f.id}": _score(f) for f in d.frontiers})
+        self._log_series(METRICS_FRONTIER_SCORES, {f"F{f.id}": _score(f) for f in d.frontiers})
         chosen = next((f for f in d.frontiers if f.id == d.chosen_frontier), None)
         parts = {} if chosen is None else {"LLM": chosen.s_llm, "CU": chosen.s_cu, "fused": chosen.fused}
-        self._log_series("metrics/chosen_frontier", {k: math.nan if v is None else v for k, v in parts.items()})
+        self._log_series(METRICS_CHOSEN_FRONTIER, {k: math.nan if v is None else v for k, v in parts.items()})
         if any(f.llm_scores for f in d.frontiers):
             self._log_language(d.frontiers, chosen)
         # The rule's line at each new choice, and a line when no frontier is the goal any more (the
         # target seen, a look goal, an escape): a replayed or exported step shows the rule in force.
         fusion = None if chosen is None else chosen.fusion
         if fusion is not self._last_fusion:
-            self._rec.log("log/fusion", rr.TextLog(fusion.describe() if fusion is not None else _no_rule(d.goal_kind)))
+            self._rec.log(LOG_FUSION, rr.TextLog(fusion.describe() if fusion is not None else _no_rule(d.goal_kind)))
         self._last_fusion = fusion
 
     def _log_language(self, frontiers: list, chosen) -> None:
@@ -283,14 +290,14 @@ class Recorder:
         per goal as lines F<id>."""
         self._log_series(LANGUAGE_CHOSEN, {} if chosen is None else chosen.llm_scores, colors=category_color)
         if any(f.expected_m for f in frontiers):
-            self._log_series(f"{LANGUAGE_CHOSEN}_metres", {} if chosen is None else chosen.expected_m,
+            self._log_series(LANGUAGE_CHOSEN_METRES, {} if chosen is None else chosen.expected_m,
                              colors=category_color)
         by_goal: dict[str, dict[str, float]] = {}
         for f in frontiers:
             for goal, p in f.llm_scores.items():
                 by_goal.setdefault(goal, {})[f"F{f.id}"] = p
         for goal, values in by_goal.items():
-            self._log_series(f"{LANGUAGE_BY_GOAL}/{goal.replace(' ', '_')}", values)
+            self._log_series(language_by_goal(goal), values)
 
     def _log_series(self, entity: str, values: dict[str, float], colors=None) -> None:
         """One entity, one named line per key: a key's line index never changes, a missing value is
@@ -313,7 +320,7 @@ class Recorder:
             self._last_map_ids = None
         ids, box = _map_ids(m)
         if self._last_map_ids is None or not np.array_equal(ids, self._last_map_ids):
-            rec.log("map/semantic", rr.SegmentationImage(ids))
+            rec.log(MAP_SEMANTIC, rr.SegmentationImage(ids))
             self._last_map_ids = ids
         if box is not None:
             self._fit_view(box, m.resolution_m, final=False)
@@ -323,18 +330,18 @@ class Recorder:
         here = (c + 0.5, r + 0.5)
         if not self._map_xy or self._map_xy[-1] != here:
             self._map_xy.append(here)
-            rec.log("map/trajectory", rr.LineStrips2D([self._map_xy], colors=[AGENT_RGB], radii=[0.6]))
+            rec.log(MAP_TRAJECTORY, rr.LineStrips2D([self._map_xy], colors=[AGENT_RGB], radii=[0.6]))
         heading = (math.cos(m.agent_heading) * 8.0, math.sin(m.agent_heading) * 8.0)
-        rec.log("map/agent", rr.Points2D([here], colors=[AGENT_RGB], radii=[3.0]),
+        rec.log(MAP_AGENT, rr.Points2D([here], colors=[AGENT_RGB], radii=[3.0]),
                 rr.Arrows2D(origins=[here], vectors=[heading], colors=[AGENT_RGB]))
 
         self._log_goal(d)
         self._log_collision_marks(d.collision_marks)
-        self._log_point("map/short_term_goal", d.short_term_goal, 2.0, (255, 160, 0), None)
+        self._log_point(MAP_SHORT_TERM_GOAL, d.short_term_goal, 2.0, (255, 160, 0), None)
         self._log_frontiers(d.frontiers, d.chosen_frontier)
         if d.long_term_goal is not None:
             gx, gy = m.cell_to_world(*d.long_term_goal)
-            rec.log("world/goal", rr.Points3D([[gx, gy, 0.1]], colors=[GOAL_RGB], radii=[0.15]))
+            rec.log(WORLD_GOAL, rr.Points3D([[gx, gy, 0.1]], colors=[GOAL_RGB], radii=[0.15]))
 
     def _fit_view(self, box: tuple[int, int, int, int], resolution_m: float, *, final: bool) -> None:
         """Fit the map view to what is mapped: re-sent when the mapped area outgrows the view, and
@@ -358,20 +365,20 @@ class Recorder:
             return
         self._last_target = boxes
         if not boxes:
-            self._clear("map/target")
+            self._clear(MAP_TARGET)
             return
-        self._cleared["map/target"] = False
+        self._cleared[MAP_TARGET] = False
         mins = [(c0, r0) for r0, r1, c0, c1 in boxes]
         sizes = [(c1 - c0, r1 - r0) for r0, r1, c0, c1 in boxes]
         labels = [f"target: {goal}"] + [""] * (len(boxes) - 1)
-        self._rec.log("map/target", rr.Boxes2D(mins=mins, sizes=sizes, colors=[TARGET_RGB], radii=[0.8],
-                                               labels=labels, show_labels=True))
+        self._rec.log(MAP_TARGET, rr.Boxes2D(mins=mins, sizes=sizes, colors=[TARGET_RGB], radii=[0.8],
+                                             labels=labels, show_labels=True))
 
     def _log_camera_target(self, obs, goal: str) -> None:
         """The target's pixels boxed in the RGB and semantic frames (what the detector reports)."""
         mask = obs.semantic == obs.categories.index(goal) + 1 if goal in obs.categories else None
         boxes = () if mask is None else _blob_boxes(mask, _TARGET_MERGE_PX)
-        for entity in ("camera/rgb/target", "camera/semantic/target"):
+        for entity in (CAMERA_RGB_TARGET, CAMERA_SEMANTIC_TARGET):
             if not boxes:
                 self._clear(entity)
                 continue
@@ -385,14 +392,14 @@ class Recorder:
         """The long-term goal as a cross drawn above the frontiers (it sits on the chosen one), labelled
         with its kind unless it is that frontier (whose label says so)."""
         if d.long_term_goal is None:
-            self._clear("map/goal")
+            self._clear(MAP_GOAL)
             return
-        self._cleared["map/goal"] = False
+        self._cleared[MAP_GOAL] = False
         x, y = d.long_term_goal[1] + 0.5, d.long_term_goal[0] + 0.5
         arm = _GOAL_ARM_CELLS
         label = None if d.chosen_frontier is not None else f"goal ({d.goal_kind})"
-        self._rec.log("map/goal", rr.Points2D([(x, y)], colors=[GOAL_RGB], radii=[1.2], draw_order=41,
-                                              labels=[label] if label else None),
+        self._rec.log(MAP_GOAL, rr.Points2D([(x, y)], colors=[GOAL_RGB], radii=[1.2], draw_order=41,
+                                            labels=[label] if label else None),
                       rr.LineStrips2D([[(x - arm, y - arm), (x + arm, y + arm)],
                                        [(x - arm, y + arm), (x + arm, y - arm)]],
                                       colors=[GOAL_RGB], radii=[0.8], draw_order=40))
@@ -404,11 +411,11 @@ class Recorder:
             return
         self._last_marks = marks
         if marks is None or not len(marks):
-            self._clear("map/collision_marks")
+            self._clear(MAP_COLLISION_MARKS)
             return
-        self._cleared["map/collision_marks"] = False
-        self._rec.log("map/collision_marks", rr.Points2D(marks[:, ::-1] + 0.5, colors=[COLLISION_RGB], radii=[0.5],
-                                                         draw_order=30))
+        self._cleared[MAP_COLLISION_MARKS] = False
+        self._rec.log(MAP_COLLISION_MARKS, rr.Points2D(marks[:, ::-1] + 0.5, colors=[COLLISION_RGB], radii=[0.5],
+                                                       draw_order=30))
 
     def _log_point(self, entity: str, cell, radius: float, rgb, label: str | None) -> None:
         if cell is None:
@@ -421,10 +428,10 @@ class Recorder:
 
     def _log_frontiers(self, frontiers: list, chosen: int | None) -> None:
         if not frontiers:
-            self._clear("map/frontiers")
-            self._clear("map/frontier_cells")
+            self._clear(MAP_FRONTIERS)
+            self._clear(MAP_FRONTIER_CELLS)
             return
-        self._cleared["map/frontiers"] = self._cleared["map/frontier_cells"] = False
+        self._cleared[MAP_FRONTIERS] = self._cleared[MAP_FRONTIER_CELLS] = False
         centers = np.array([(f.center[1] + 0.5, f.center[0] + 0.5) for f in frontiers], np.float32)
         scores = np.array([_score(f) for f in frontiers], np.float32)
         colors = score_colors(scores)
@@ -432,22 +439,22 @@ class Recorder:
         top = set(np.argsort(-scores, kind="stable")[:LABELLED_FRONTIERS].tolist())
         labels = [_frontier_label(f, f.id == chosen) if i in top or f.id == chosen else ""
                   for i, f in enumerate(frontiers)]
-        self._rec.log("map/frontiers", rr.Points2D(centers, colors=colors, radii=radii, labels=labels,
-                                                   show_labels=True),
+        self._rec.log(MAP_FRONTIERS, rr.Points2D(centers, colors=colors, radii=radii, labels=labels,
+                                                 show_labels=True),
                       rr.AnyValues(frontier_id=np.array([f.id for f in frontiers], np.int32),
                                    score_llm=_scores(frontiers, "s_llm"), score_cu=_scores(frontiers, "s_cu"),
                                    score_fused=_scores(frontiers, "fused"),
                                    chosen=np.array([f.id == chosen for f in frontiers])))
         cells = np.concatenate([f.cells for f in frontiers])[:, ::-1].astype(np.float32) + 0.5
         cell_colors = np.repeat(colors, [len(f.cells) for f in frontiers], axis=0)
-        self._rec.log("map/frontier_cells", rr.Points2D(cells, colors=cell_colors, radii=[0.5]))
+        self._rec.log(MAP_FRONTIER_CELLS, rr.Points2D(cells, colors=cell_colors, radii=[0.5]))
         queries = tuple((f.id, tuple(sorted(f.queries.items()))) for f in frontiers if f.queries)
         if queries and queries != self._last_queries:
             for f in frontiers:
                 for name, query in f.queries.items():
                     score = f.llm_scores.get(name)
                     tail = "" if score is None else f" -> {score:.3f}"
-                    self._rec.log("log/language", rr.TextLog(f"F{f.id} [{name}] {query}{tail}"))
+                    self._rec.log(LOG_LANGUAGE, rr.TextLog(f"F{f.id} [{name}] {query}{tail}"))
         self._last_queries = queries
 
     def _log_decision(self, ev: StepEvent) -> None:
@@ -464,16 +471,16 @@ class Recorder:
         if d.stuck:
             parts.append("(stuck)")
         level = "WARN" if d.override or d.stuck else "INFO"
-        self._rec.log("log/decisions", rr.TextLog(" ".join(parts), level=level))
+        self._rec.log(LOG_DECISIONS, rr.TextLog(" ".join(parts), level=level))
 
     def _log_result(self, ev: StepEvent) -> None:
         res = ev.result or {}
         keys = ("success", "spl", "dtg", "failure", "steps", "path_length_m", "shortest_path_m")
         summary = ", ".join(f"{k}={_fmt(res[k])}" for k in keys if k in res)
-        self._rec.log("log/episode", rr.TextLog(f"done: {summary}", level="INFO"))
+        self._rec.log(LOG_EPISODE, rr.TextLog(f"done: {summary}", level="INFO"))
         rows = "\n".join(f"| {k} | {_fmt(v)} |" for k, v in res.items() if not isinstance(v, (dict, list)))
         m = self.meta
-        self._rec.log("episode", rr.TextDocument(
+        self._rec.log(EPISODE, rr.TextDocument(
             f"# {m['scene']} episode {m['episode_id']}\n\n* dataset: `{m['dataset']}`\n* policy: `{m['policy']}`\n"
             f"* goal: **{ev.goal}**\n\n| result | value |\n|---|---|\n{rows}\n", media_type="text/markdown"))
 
