@@ -11,7 +11,8 @@ policy under test chooses among the *same* frontiers on the *same* map, and the 
 the frontier oracle's criterion: travel cost to the frontier plus the ground-truth geodesic from it to
 the goal. Regret = that total minus the best frontier's. It isolates the choice from everything that
 follows it (commitment, planning, luck of the walk), so a language prior's information shows at once
-instead of through 200-episode SPL runs with +-0.02 spread. The oracle scores 0 by construction.
+instead of through whole-episode SPL runs, whose seed spread hides small differences. The oracle
+scores 0 by construction.
 
 Reported per policy: mean regret in metres overall and per goal, and how often its choice differs from
 cost-utility's.

@@ -115,10 +115,10 @@ def test_a_single_noisy_goal_cell_is_looked_at_from_other_sides_then_set_aside(e
 
 
 def test_a_candidate_the_agent_comes_no_nearer_to_is_looked_at_from_elsewhere_then_set_aside(env):
-    """Lindenwood/0/3: two toilet cells seen, and 440 steps spent circling a bathroom the navmesh cut
-    short. Here no step can bring the agent the (impossible) required progress closer: after its
-    patience it tries another side, then sets the cells aside, instead of approaching for ever (the
-    previous build walked on until it saw the real toilet and stopped)."""
+    """A few goal cells seen in a room the agent cannot get nearer to (a bathroom the navmesh cut
+    short) must not hold it for hundreds of steps. Here no step can bring the agent the (impossible)
+    required progress closer: after its patience it tries another side, then sets the cells aside,
+    instead of approaching for ever."""
     agent = _agent(env, look_around_steps=0, goal_patience_steps=3, goal_progress_m=50.0)
     decisions, _ = _until_set_aside(env, agent, 60, 60)  # 3 m east, in the unknown
     assert any("no nearer in 3 steps" in d.reason for d in decisions)
@@ -266,7 +266,7 @@ def test_a_target_the_agent_cannot_get_closer_to_is_stopped_at_within_the_succes
 
 def test_a_stuck_agent_escapes_under_its_own_goal_kind(env):
     """Stuck while exploring: the marks go, a random turn then two steps forward, each decision
-    labelled ``GoalKind.ESCAPE`` (a plain string there broke consumers that read the kind's name)."""
+    labelled ``GoalKind.ESCAPE`` (consumers read the kind's name, which a plain string lacks)."""
     from l3mvn.agent.decision import GoalKind
 
     agent = _agent(env, look_around_steps=0)
@@ -352,9 +352,9 @@ def _corridor_with_side_room(toilet=(slice(10, 20), slice(82, 92))):
 
 @pytest.mark.parametrize("start", [Pose(x=1.0, y=3.0, heading=0.0), Pose(x=9.0, y=3.0, heading=math.pi)])
 def test_an_agent_in_a_corridor_looks_into_the_side_room_as_it_passes_and_confirms_its_toilet(start):
-    # The door spans x = 4.7..5.3 m. The previous build marked the door's frontier reached from
-    # 0.75 m beside it without looking in, walked on to the corridor's end (x = 6.65 or 3.35 m)
-    # and came back later; looking into the unknown beyond a reached frontier finds it on the way.
+    # The door spans x = 4.7..5.3 m. Marking the door's frontier reached from beside it without
+    # looking in would send the agent on to the corridor's end and back later; looking into the
+    # unknown beyond a reached frontier finds the toilet on the way.
     scene = _corridor_with_side_room()
     env = BuiltinSimulator(scene, dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=400))
     agent = _agent(env)
@@ -427,8 +427,8 @@ def test_looking_settings_are_checked_with_one_line_errors(env):
 
 
 def test_a_kept_frontier_names_why_it_was_chosen_once_not_once_per_keep():
-    """The dashboard showed "kept frontier 1 (commitment): kept frontier 1 (commitment): ..." after
-    two re-selections: the kept reason quoted the previous kept reason."""
+    """Kept again and again, a frontier's reason must not quote the previous kept reason (the dashboard
+    would show "kept frontier 1 (commitment): kept frontier 1 (commitment): ..." after two re-selections)."""
     from l3mvn.agent.modular.exploration import ExplorationGoals
     from l3mvn.agent.frontiers import Frontier
     from l3mvn.agent.planning import LocalPlanner
@@ -448,10 +448,10 @@ def test_a_kept_frontier_names_why_it_was_chosen_once_not_once_per_keep():
 
 
 def test_a_frontier_too_near_for_a_new_list_is_looked_beyond_before_the_timer_chooses_again():
-    """Klickitat/0/0 (nearest frontier): the re-selection timer fired on the step the agent came
-    within 0.5 m of its frontier, before the plan could read it as reached. The new list left that
-    frontier out (nearer than ``min_distance_m``), the agent walked 6 m to another, found the first
-    one nearest again and went back: 400 steps back and forth."""
+    """If the re-selection timer fires on the step the agent comes within 0.5 m of its frontier, before
+    the plan can read it as reached, the new list leaves that frontier out (nearer than
+    ``min_distance_m``): the agent walks to another, finds the first one nearest again and goes back,
+    back and forth for hundreds of steps."""
     from l3mvn.agent.modular.exploration import ExplorationGoals
     from l3mvn.agent.decision import GoalKind
     from l3mvn.agent.planning import LocalPlanner
@@ -483,11 +483,11 @@ def test_a_frontier_too_near_for_a_new_list_is_looked_beyond_before_the_timer_ch
 
 
 def test_with_no_other_frontier_left_the_edge_beside_guessed_obstacles_is_one():
-    """Newfields/0/3 (nearest frontier, 480x640): depth too near to read at a door frame put guessed
-    obstacles just through the door, the frontier there shrank below ``min_cluster_cells``, the map
-    had no frontier left, and the agent drew unreachable random cells for 75 steps. Guesses are the
-    weakest evidence on the map: once nothing else is left unknown, the edge beside them is a
-    frontier (the planner still walks round them)."""
+    """Depth too near to read at a door frame puts guessed obstacles just through the door; the
+    frontier there can shrink below ``min_cluster_cells``, leaving the map no frontier, and the agent
+    would draw unreachable random cells for many steps. Guesses are the weakest evidence on the map:
+    once nothing else is left unknown, the edge beside them is a frontier (the planner still walks
+    round them)."""
     from l3mvn.agent.modular.exploration import ExplorationGoals
     from l3mvn.agent.decision import GoalKind
     from l3mvn.agent.planning import LocalPlanner

@@ -369,9 +369,9 @@ def test_the_navmesh_cell_divides_the_body_radius(radius):
 
 @needs_habitat
 def test_habitat_keeps_the_passages_our_grid_keeps(tmp_path):
-    """House 1's first episode crosses a door within a voxel of the body's width: with habitat's
-    default 0.05 m cells its navmesh closed it (geodesic 2.06 x the file's); with the fitted cell
-    every habitat geodesic is the file's within 5%."""
+    """House 1's first episode crosses a door within a voxel of the body's width: habitat's default
+    0.05 m cells close it in the navmesh (the geodesic then about twice the file's); with the fitted
+    cell every habitat geodesic is the file's within 5%."""
     from l3mvn.world.datasets import load_episode_set
     from l3mvn.world.datasets.hm3d_export import export_hm3d
 

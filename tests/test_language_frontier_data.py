@@ -123,7 +123,7 @@ def test_training_is_deterministic_for_a_seed_and_learns_the_toilet_side(tmp_pat
     a, b = torch.load(tmp_path / "a.pt", weights_only=True), torch.load(tmp_path / "b.pt", weights_only=True)
     assert all(torch.equal(a["state_dict"][k], b["state_dict"][k]) for k in a["state_dict"])
     assert one["val"] == two["val"] and one["houses"]["val"] == ["Hiteman"]
-    assert one["val"]["regret_m"] < one["val"]["nearest_regret_m"]  # the sink side wins on unseen Hiteman
+    assert one["val"]["regret_m"] < one["val"]["nearest_regret_m"]  # the sink side wins on the unseen house
     assert a["meta"]["kind"] == "frontiers" and a["meta"]["houses"]["train"] == ["Allensville", "Coffeen"]
 
 

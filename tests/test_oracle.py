@@ -51,7 +51,7 @@ def test_infeasible_episodes_are_failures_counted_apart_and_the_run_finishes(shu
 
 def test_the_oracle_succeeds_where_each_goal_has_a_single_view_point(tmp_path, capsys):
     """habitat's 0.1 m around one view point is a few cells: the greedy walk stalls beside it and
-    the oracle searches its way in over the motion model (each of these episodes failed without)."""
+    the oracle searches its way in over the motion model (without the search each of these episodes fails)."""
     import gzip
 
     from l3mvn.world.datasets.hm3d_export import export_hm3d

@@ -196,8 +196,8 @@ def test_action_turns_toward_the_goal_and_goes_forward_when_aligned(heading_deg,
 
 
 def test_a_goal_that_moves_with_the_heading_does_not_turn_the_agent_back_and_forth():
-    """Lindenwood/0/7: a sighting's bearing shifted with the view, 96 degrees seen at heading 77 and
-    90 degrees at 107, so each heading turned to the other for 48 steps."""
+    """A sighting's bearing that shifts with the view (here 96 degrees seen at heading 77 and 90 degrees
+    at 107) must not make each heading turn to the other for ever."""
     planner = _planner()
     heading, actions = 77.0, []
     for _ in range(4):
@@ -249,8 +249,8 @@ def test_failed_forward_step_blocks_cells_ahead_and_the_next_plan_goes_around():
 
 
 def test_a_failed_step_towards_the_target_leaves_the_passage_beside_it_open():
-    """Forkland: bumping into floor the navmesh lost, right beside the only passage to the toilet.
-    An exploring mark (5 cells wide) closes the passage; the target's (1, then 3 wide) does not."""
+    """Bumping into floor the navmesh lost, right beside the only passage to the toilet: an exploring
+    mark (5 cells wide) closes the passage; the target's (1, then 3 wide) does not."""
     obstacle = _room()
     obstacle[:, 33] = True
     obstacle[57:64, 33] = False  # passable rows 58-62 once the wall grows by a cell
@@ -264,8 +264,8 @@ def test_a_failed_step_towards_the_target_leaves_the_passage_beside_it_open():
 
 
 def test_marks_that_force_a_detour_to_the_target_are_cleared_a_few_times_an_episode():
-    """Forkland/0/1 at 480x640: beside the toilet the floor is a passage as wide as the agent, which
-    marks thickening its sides close from the second collision on; the way round is 5 m longer.
+    """Beside the toilet the floor is a passage as wide as the agent, which marks thickening its
+    sides close from the second collision on; the way round is 5 m longer.
     Approaching the target the marks are cleared (``target_mark_clears`` times), exploring they stay;
     cleared collisions still count as collisions for the stuck signal."""
     obstacle = _room()
@@ -300,8 +300,8 @@ def _passage(below: int, above: int) -> np.ndarray:
 
 
 def test_a_step_into_a_mapped_corner_marks_beside_it_when_a_mark_across_would_shut_the_way():
-    """Marstons/0/6: grazing the mapped corner of a 0.4 m passage, the rectangle laid straight ahead
-    shut it and the toilet's room was never reached. When the rectangle lengthens the way by over
+    """Grazing the mapped corner of a 0.4 m passage, the rectangle laid straight ahead would shut it
+    and the room behind it would never be reached. When the rectangle lengthens the way by over
     ``target_mark_detour_m``, the step swept nearer a mapped obstacle and, with the cells beside that
     obstacle marked instead, the plan turns off the failed heading, those are marked; a second
     failed step in a row still blocks the way ahead."""
@@ -322,9 +322,9 @@ def test_a_step_into_a_mapped_corner_marks_beside_it_when_a_mark_across_would_sh
 
 
 def test_marks_beside_that_leave_the_failed_step_the_way_on_are_not_laid():
-    """Stockman/0/6: marked beside the obstacle, the plan stepped the same way again and failed again.
-    A step straight along the passage's axis, whose mapped corner the marks beside do not move the
-    way off, keeps the rectangle."""
+    """Marked beside the obstacle, a plan that steps the same way again fails again: a step straight
+    along the passage's axis, whose mapped corner the marks beside do not move the way off, keeps
+    the rectangle."""
     obstacle = _passage(57, 62)
     planner = LocalPlanner.for_sim(PlannerConfig(), RES, SIM)
     plan = planner.plan(obstacle, (58, 84), math.pi, (58, 20), last_move_m=0.0)
@@ -355,8 +355,8 @@ def test_a_step_the_map_cannot_explain_or_whose_mark_leaves_the_way_open_blocks_
 
 
 def test_the_way_keeps_a_cell_more_off_walls_where_the_floor_allows():
-    """Along a wall the body's 1-cell growth lets the centre graze it (19% of forward steps failed in
-    lost dev episodes): the short-term goal keeps the clearance; without it, it runs along the wall."""
+    """Along a wall the body's 1-cell growth lets the centre graze it (and forward steps fail): the
+    short-term goal keeps the clearance; without it, it runs along the wall."""
     obstacle = _room()
     cfg = PlannerConfig()
     edge = 1 + cfg.obstacle_dilation_cells  # the first row the body's growth leaves free below the wall
@@ -535,8 +535,8 @@ def test_closed_loop_agent_reaches_a_goal_through_a_door():
 @pytest.mark.parametrize("bearing_deg", [10, 15, 45, 75])
 def test_a_path_between_two_headings_is_walked_without_turning_at_every_step(bearing_deg):
     """SemExp's rule turns whenever the short-term goal lies over 15 degrees off: on a path between
-    two 30-degree headings the error crosses that at nearly every step, and the agent turned left,
-    stepped, turned right, stepped (198 of 500 steps were such turns in a Gibson episode)."""
+    two 30-degree headings the error crosses that at nearly every step, and the agent turns left,
+    steps, turns right, steps, spending a large share of its steps on such turns."""
     goal_m = (1.0 + 8.0 * math.sin(math.radians(bearing_deg)), 1.0 + 8.0 * math.cos(math.radians(bearing_deg)))
     goal = (int(goal_m[0] / RES), int(goal_m[1] / RES))
     turns = {}

@@ -159,8 +159,8 @@ def _outcome(tmp_path, protocol: int, state: tuple) -> str:
 @given(flags=st.integers(-(2**63), 2**63 - 1), order=st.sampled_from(["<", ">", "|", "=", "x", ""]),
        sizes=st.tuples(st.integers(-3, 64), st.integers(-3, 64)), protocol=st.integers(0, pickle.HIGHEST_PROTOCOL))
 def test_crafted_dtype_state_never_reaches_numpy(tmp_path, flags, order, sizes, protocol):
-    """Whatever flags and sizes a file gives a dtype (0x01 once claimed an array of objects, 0x3f
-    raised SystemError), the outcome is that of the plain dtype: only the byte order is read, and a
+    """Whatever flags and sizes a file gives a dtype (0x01 claims an array of objects, 0x3f makes
+    numpy raise SystemError), the outcome is that of the plain dtype: only the byte order is read, and a
     byte order numpy never writes is refused in one line."""
     plain = _outcome(tmp_path, protocol, (3, order, None, None, None, -1, -1, 0))
     assert _outcome(tmp_path, protocol, (3, order, None, None, None, sizes[0], sizes[1], flags)) == plain

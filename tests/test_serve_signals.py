@@ -210,7 +210,7 @@ def test_serve_with_a_bad_port_or_host_is_one_line_and_status_2(cli, argv, messa
     assert message in line
 
 
-@pytest.mark.timeout(60)  # before the fix viser waited forever for a server thread that had died
+@pytest.mark.timeout(60)  # unhandled, viser waits forever for a server thread that died: fail, not hang
 @pytest.mark.parametrize("port, message", [(None, "is in use on 127.0.0.1"), (99999, "--port must lie in 1..65535")])
 def test_a_port_lost_after_the_check_is_reported_not_moved_to_the_next_and_leaves_no_thread(port, message):
     """The race the up-front check cannot close: viser's own bind fails (viser would take the next port)."""

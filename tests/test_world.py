@@ -223,7 +223,7 @@ def _pixels(scene: SceneMap, category: str, row: int, col: int, heading: float) 
 
 
 def test_a_toilet_drawn_inside_an_oven_footprint_keeps_every_cell_and_shows_from_the_floor():
-    # Pomaria: the map draws a toilet inside an oven's footprint; tallest-wins built only the oven.
+    # A map may draw a toilet inside an oven's footprint; tallest-wins would build only the oven.
     oven = (slice(4, 20), slice(76, 96))
     toilet = (slice(6, 14), slice(82, 90))
     scene = two_rooms(("oven", "toilet"), {"oven": oven, "toilet": toilet})
@@ -249,7 +249,7 @@ def test_a_plant_behind_a_taller_sink_shows_over_it():
 
 
 def test_a_small_item_drawn_over_a_goal_object_neither_stacks_on_it_nor_rings_it():
-    # Marstons: a vase footprint covering and surrounding a potted plant buried it in a 1.05 m ring.
+    # A vase footprint covering and surrounding a potted plant would bury it in a ring stacked on its top.
     vase = (slice(26, 40), slice(76, 90))
     plant = (slice(30, 36), slice(80, 86))
     scene = two_rooms(("vase", "potted plant"), {"vase": vase, "potted plant": plant})

@@ -53,5 +53,5 @@ class Decision:
     stuck: bool = False
     timings_ms: dict[str, float] = field(default_factory=dict)
     # (N, 2) int32 map cells the agent's failed forward steps blocked: walls to the planner, though
-    # the map may show free floor there (what closed Forkland/0/6's way to its toilet).
+    # the map may show free floor there (so they can close a way the map shows open).
     collision_marks: np.ndarray | None = None

@@ -89,9 +89,9 @@ def too_near_points(
 
     A sensor reads 0 both below its minimum range and beyond its maximum, but a downward ray that
     would meet the floor within range cannot have seen nothing: the floor is there, so something
-    nearer than ``min_depth_m`` stopped it. Dropped with the rest, such readings hid every wall the
-    agent stood within 0.5 m of without having mapped it from farther (turned towards it, come round
-    a corner), and it walked into it. The point is placed at the farthest the obstacle can be, so it
+    nearer than ``min_depth_m`` stopped it. Dropped with the rest, such readings would hide every wall
+    within 0.5 m that the agent had not mapped from farther (turned towards it, come round a corner),
+    and it would walk into it. The point is placed at the farthest the obstacle can be, so it
     never lies in front of it; the floor in between stays as it was, unknown or seen.
     """
     _check_frame(depth, None, intrinsics)

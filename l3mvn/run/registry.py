@@ -32,8 +32,7 @@ from l3mvn.core.errors import L3MVNError
 from l3mvn.core.plugins import discover
 from l3mvn.run.session import Policy
 from l3mvn.world.baselines import ObjectDistances, OraclePolicy, RandomWalkPolicy
-from l3mvn.world.sim.base import Environment
-from l3mvn.world.sim.simulator import BuiltinSimulator
+from l3mvn.world.sim.base import Environment, MotionModel
 from l3mvn.world.task import ObjectNavTask
 
 PLUGIN_GROUP = "l3mvn.policies"
@@ -96,9 +95,9 @@ def _language(name: str, language: Language) -> Callable[[PolicyContext], Policy
 
 
 def _oracle(ctx: PolicyContext) -> Policy:
-    if not isinstance(ctx.env, BuiltinSimulator):
-        raise L3MVNError("policy 'oracle' plans on the built-in simulator's own motion model: run it with "
-                         "--sim builtin (oracle-frontier reads the ground truth on any simulator)")
+    if not isinstance(ctx.env, MotionModel):
+        raise L3MVNError(f"policy 'oracle' plans on the environment's motion model, and a {type(ctx.env).__name__} "
+                         "has none (forward_result): run it on the built-in simulator or the habitat bridge")
     assert ctx.task is not None
     return OraclePolicy(ctx.env, ctx.task)
 

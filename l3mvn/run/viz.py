@@ -54,7 +54,7 @@ _NAMED_RGB: dict[str, tuple[int, int, int]] = {
     "laundry hamper": (120, 150, 90),
 }
 
-# For names not listed: the next colours of the same greedy pick (a hue from a name hash gave
+# For names not listed: the next colours of the same greedy pick (a hue from a name hash gives
 # dozens of near-identical blues and greens).
 _SPARE_RGB: tuple[tuple[int, int, int], ...] = (
     (180, 90, 150), (195, 165, 210), (15, 165, 210), (240, 165, 0), (180, 255, 225), (195, 15, 75),

@@ -15,7 +15,7 @@ import zlib
 import numpy as np
 from scipy import ndimage as ndi
 
-from l3mvn.world.sim.simulator import BuiltinSimulator
+from l3mvn.world.sim.base import MotionModel
 from l3mvn.core.types import Action, Observation, Pose, wrap_angle
 from l3mvn.world.episode import Episode
 from l3mvn.world.task import GoalRegion, ObjectNavTask, geodesic_field
@@ -25,7 +25,7 @@ _NEIGHBOURS = np.array([(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1
 
 class OraclePolicy:
     """Follows the ground-truth shortest path to the success region, then stops. It plans on the
-    built-in simulator's own motion model (``forward_result``), so it runs on that backend only."""
+    environment's motion model (``MotionModel.forward_result``)."""
 
     name = "oracle"
     lookahead_cells = 8
@@ -36,7 +36,7 @@ class OraclePolicy:
     search_states = 30_000
     stuck = False  # it reads the true distance field: never stuck by its own account
 
-    def __init__(self, env: BuiltinSimulator, task: ObjectNavTask) -> None:
+    def __init__(self, env: MotionModel, task: ObjectNavTask) -> None:
         self.env, self.task = env, task
         self._goal = ""
         self._fields: dict[str, np.ndarray] = {}

@@ -231,7 +231,7 @@ def _clusters(frontier: np.ndarray, min_cells: int, offset: tuple[int, int]) -> 
 
 
 def _nonzero(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``np.nonzero`` of a 2-D mask via ``flatnonzero``: about 13x faster, and it was the hot spot."""
+    """``np.nonzero`` of a 2-D mask via ``flatnonzero``: an order of magnitude faster, on a hot path."""
     rows, cols = np.divmod(np.flatnonzero(mask), mask.shape[1])
     return rows, cols
 

@@ -55,7 +55,7 @@ from l3mvn.agent.language.models import MINILM, load_sentence_encoder
 from l3mvn.agent.language.vocabulary import GOALS
 
 HOUSE_SPLITS = ("train", "val", "test")
-# Of 100 hash buckets: test first, then val. On the 25 Gibson train houses: 6 test, 5 val, 14 train.
+# Of 100 hash buckets: test first, then val, the rest train (a small set of houses meets these shares roughly).
 _TEST_BUCKETS, _VAL_BUCKETS = 20, 10
 FRONTIER_HEAD_KIND = "frontiers"
 

@@ -337,8 +337,8 @@ class SemanticMapper:
         the farthest such an obstacle can be: in front of a wall that lies inside it, but round a
         corner (a door frame) it is floor. So a guess never lands on floor the map has seen, floor
         seen later takes it back, and an obstacle seen there makes it a real one. A guess leaves its
-        cell unexplored: guesses beyond a door frame marked explored closed the frontier into the
-        room (oracle-frontier's Woodbine/0/2 lost its toilet, 0.3 m beyond that frontier)."""
+        cell unexplored: guesses beyond a door frame marked explored would close the frontier into
+        the room, and a goal just beyond that frontier would never be found."""
         cfg, size = self.cfg, self.cfg.map_cells
         obstacle, inferred = self._obstacle.reshape(-1), self._inferred.reshape(-1)
         inferred[seen_obstacle] = False

@@ -65,9 +65,9 @@ class ExplorationGoals:
         """Every ``replan_every`` steps, at once when forced (inf), never while a policy that keeps
         its goal (random sample) still pursues one, while walking up to a frontier, or once nearer
         its frontier than ``min_distance_m``: a new list would leave that frontier out, unexplored,
-        and it came back once the agent had walked away (Klickitat/0/0, nearest frontier: 400 steps
-        back and forth between two frontiers). This step's plan reads it as reached instead, and
-        the agent looks beyond it before choosing again."""
+        and it would come back once the agent had walked away, so the agent could walk back and
+        forth between two frontiers for hundreds of steps. This step's plan reads it as reached
+        instead, and the agent looks beyond it before choosing again."""
         if self.cell is None or self.since_select == math.inf:
             return True
         keeps = self.kind == GoalKind.RANDOM and getattr(self.global_policy, "keeps_goal", False)
@@ -92,9 +92,9 @@ class ExplorationGoals:
         if not self.frontiers and sem_map.inferred is not None and sem_map.inferred.any():
             # Nothing left unknown but beyond guessed obstacles (depth nearer than the sensor reads),
             # the weakest evidence on the map: through a door frame they cut its frontier below
-            # ``min_cluster_cells``, and the agent drew unreachable random cells for 75-160 steps
-            # (Newfields/0/3, Mifflinburg/0/0). The edge beside a guess is a frontier then; the
-            # planner still walks round the guesses, and seeing the floor beyond takes them back.
+            # ``min_cluster_cells``, leaving no frontier, and the agent would draw unreachable random
+            # cells for a long time. The edge beside a guess is a frontier then; the planner still
+            # walks round the guesses, and seeing the floor beyond takes them back.
             self.frontiers = self.extract(sem_map, sem_map.seen_obstacle)
         if not self.frontiers and self.blocked:
             # Every frontier left was reached once and is still there (the camera could not clear
@@ -132,8 +132,8 @@ class ExplorationGoals:
 
     def blocked_radii(self, resolution_m: float) -> np.ndarray:
         """Cells around each done goal where frontiers are dropped: ``blocked_radius_m``, halved for a
-        frontier the agent stood on and looked beyond (only that spot is done: Lakeville/0/1's
-        bathroom door lay 0.7 m from such a spot and the full radius dropped it for good)."""
+        frontier the agent stood on and looked beyond (only that spot is done: the full radius
+        would drop for good a door that lies just beside such a spot)."""
         full = self.blocked_radius_cells(resolution_m)
         return np.array([full / 2 if cell in self.stood else full for cell in self.blocked], dtype=np.float64)
 

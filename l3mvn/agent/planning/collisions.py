@@ -5,10 +5,10 @@ wider with every consecutive collision (narrower marks while approaching a targe
 can close the last passage); the planner treats those cells as obstacles. Where the map shows an
 obstacle the first failed step of a run swept nearer to, the cells beside that obstacle are kept as
 an alternative mark, which the planner lays instead when the rectangle lengthens its way and the
-plan then turns off the failed heading: grazing a mapped corner, the rectangle shut the 0.4 m
-passage beside it (oracle-frontier's Marstons/0/6 never reached its toilet's room). Laid whenever
-the map showed an obstacle, the marks beside cost a second collision where that obstacle was not
-what the body hit (floor the navmesh lost looks free on the map). Stuck means too many
+plan then turns off the failed heading: grazing a mapped corner, the rectangle would shut a
+passage barely wider than the body beside it, and the room behind it would never be reached. Laid
+whenever the map shows an obstacle, the marks beside cost a second collision where that obstacle
+was not what the body hit (floor the navmesh lost looks free on the map). Stuck means too many
 collisions, or too little displacement, within the last ``stuck_window_steps``.
 """
 

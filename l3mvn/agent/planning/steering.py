@@ -86,7 +86,7 @@ class Steering:
                 action = Action.MOVE_FORWARD
             # A turn straight back on the same cell undoes the last one. It happens when the goal moves
             # with the view (a sighting's bearing shifts as the frame does): the two headings then take
-            # turns for ever (Lindenwood/0/7, 48 steps). Within two thresholds of the goal, step instead.
+            # turns for ever. Within two thresholds of the goal, step instead.
             back = _TURN_BACK.get(action)
             if back is not None and self._last == (agent, back) and abs(error) <= 2 * threshold:
                 action = Action.MOVE_FORWARD
@@ -98,9 +98,8 @@ class Steering:
         """Whether the agent, having just stepped forward off its last cell, steps on rather than turn:
         the short-term goal lies within ``keep_heading_deg``, the step's cells are traversible and
         it ends nearer the goal on ``field``. A path between two headings otherwise flips the bearing
-        error across ``turn_threshold_deg`` at every step, and the agent turned left, stepped,
-        turned right, stepped (frontier's Stockman/0/4 at 480x640: 198 of its 500 steps were turns
-        along its paths)."""
+        error across ``turn_threshold_deg`` at every step, and the agent turns left, steps, turns
+        right, steps, spending a large share of its step budget on turns along its paths."""
         if self._last is None:
             return False
         cell, last = self._last

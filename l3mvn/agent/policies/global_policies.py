@@ -86,15 +86,15 @@ class RandomSample:
     explored floor, where the floor evidently goes on (any such cell once none is left).
 
     Walls close as the planner sees them: obstacles grow by its ``obstacle_dilation_cells``. At
-    120x160 a mapped wall has gaps of a cell or two; measured through them, a quarter of the band
-    (0.27 of its cells over 116 draws on 25 dev episodes) lay behind walls, reached only by a detour
-    round the house (Lakeville/0/0: a sample 2.4 m away behind a wall cost 47 steps).
+    120x160 a mapped wall has gaps of a cell or two; measured through them, a large share of the
+    band lies behind walls, reached only by a detour round the house (a sample a few metres away
+    behind a wall can cost dozens of steps).
     """
 
     name = "random-sample"
     # A sampled goal stands until reached or found unreachable: re-sampled every 10 steps (the
-    # frontier policies' period) the agent walked 10-step legs in random directions, and 25 of its 35
-    # failures on the dev houses ran out of steps with a median 62% of the floor mapped.
+    # frontier policies' period), the agent walks 10-step legs in random directions and runs out of
+    # steps with much of the floor still unmapped.
     keeps_goal = True
     # Unknown cells deep beyond the explored floor are mostly outside the house (its outer wall not
     # yet mapped): a goal there costs a walk to the wall. 1.5 m keeps the next room's worth of floor.

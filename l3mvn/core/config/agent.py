@@ -16,7 +16,7 @@ class AgentConfig:
     map_input_height: int = 120
     map_input_width: int = 160
     replan_every: int = 10  # num_local_steps: re-select the long-term goal this often
-    look_around_steps: int = 12  # an initial 360-degree turn (12 x 30 deg): ~+0.08 SPL in the prototype
+    look_around_steps: int = 12  # an initial 360-degree turn (12 x 30 deg): the first map shows all round the start
     target_min_cells: int = 4  # cells of the goal channel before the target counts as seen
     stop_distance_m: float = 0.9  # stop when the mapped target is this close (success needs < 1.0 m)
     # When no path leads closer (unreachable, or stuck against what the map does not show), stop
@@ -35,20 +35,20 @@ class AgentConfig:
     escape_after_unreachable: int = 3
     # Exploration goals (frontiers, sampled cells, manual cells) are approached with this small goal
     # disk, not the object's 0.5 m one: that one reaches through walls, so a frontier in the next
-    # room read as "reached" from this side and the agent pushed into the wall.
+    # room would read as "reached" from this side and the agent would push into the wall.
     explore_goal_dilation_m: float = 0.1
     # A reached or unreachable exploration goal blocks frontiers whose centre lies this close to it.
     blocked_radius_m: float = 1.0
     max_reselect: int = 3  # exploration goals tried within one step before walking on
     # An exploration goal the agent has not come goal_progress_m closer to in this many steps is given up like
     # an unreachable one: a path through unknown space that keeps meeting new walls stays "reachable"
-    # while the agent circles (random-sample kept such goals for 480 steps on the dev houses).
+    # while the agent circles (a policy that keeps its goal, random sample, would circle for hundreds of steps).
     goal_patience_steps: int = 40
     goal_progress_m: float = 0.5  # ... "closer" means by at least this much
     # Reaching a goal is not seeing it: an exploration goal or a glimpsed target counts as looked at
     # only once it lies within this angle of the view's centre (the 79-degree view's half is 39.5).
-    # Gibson toilets were missed this way: the frontier at a bathroom door read as reached from
-    # 0.75 m beside it, was blocked, and the room behind it was never looked into.
+    # Without it a frontier at a door reads as reached from beside the door, is blocked, and the
+    # room behind it (a bathroom and its toilet) is never looked into.
     look_tolerance_deg: float = 30.0
     # ... and a frontier that still borders unknown space once faced is walked up to this close.
     frontier_press_m: float = 0.3
@@ -61,8 +61,9 @@ class AgentConfig:
     viewpoint_min_m: float = 1.2
     viewpoint_max_m: float = 1.8
     # The goal filling this share of the (mapped) frame beyond the depth range (no depth, so no map
-    # cells) is a sighting worth walking towards: a tv 6 m down a corridor showed 120 pixels for two
-    # steps and the agent turned away for good (Tolstoy). Larger blobs without depth are too near.
+    # cells) is a sighting worth walking towards: a goal far down a corridor may show as a small blob
+    # for only a step or two, and the agent would turn away from it for good. Larger blobs without
+    # depth are too near.
     glimpse_min_fraction: float = 0.001
     glimpse_max_fraction: float = 0.05
 

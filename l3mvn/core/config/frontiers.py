@@ -19,10 +19,9 @@ class FrontierConfig:
 
     Units: ``*_cells`` in map cells, ``*_m`` in metres. ``cu_lambda`` is in cells of frontier per
     metre of travel (the paper gives no value): the default 40 makes one metre of walking cost as
-    much as two metres of frontier are worth. On the 200 Gibson dev episodes (world of the first
-    landing) it moved cost-utility from SR 0.835 / SPL 0.579 (lambda 20) to 0.860 / 0.576: with a
-    cheaper walk a large far cluster wins over the small room next door, and toilet episodes suffer
-    most (the spec's lessons). ``utility="official_code"`` scores ``size + near_bonus`` when the
+    much as two metres of frontier are worth. With a cheaper walk (a smaller lambda) a large far
+    cluster wins over the small room next door, and toilet episodes suffer most (the spec's
+    lessons). ``utility="official_code"`` scores ``size + near_bonus`` when the
     frontier is closer than ``near_bonus_m`` and ignores the cost term; use ``official_code()`` for
     the code's full setting (top 4). ``edge="largest"`` keeps the contour of the largest explored blob
     only (the paper); ``"all"`` keeps the outer contour of every explored blob.

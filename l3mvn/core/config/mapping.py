@@ -25,7 +25,7 @@ class MapConfig:
     """
 
     resolution_m: float = 0.05
-    # 48 m: an agent 18 m from its start fell off a 36 m map in a 32 m wide Gibson house (Lindenwood).
+    # 48 m: a 36 m map reaches only 18 m from the start, and large Gibson houses are over 30 m wide.
     map_size_m: float = 48.0
     local_map_divisor: int = 2
     obstacle_min_height_m: float = 0.25

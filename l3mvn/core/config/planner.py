@@ -16,11 +16,11 @@ class PlannerConfig:
     # from where the agent's centre may stand, so a 3-cell dilation closes real doorways of Gibson houses.
     obstacle_dilation_cells: int = 1
     # That growth lets the agent's centre run along the very edge of where it may stand, and a
-    # heading up to 15 degrees off its path then grazes the wall: 19% of l3mvn-ff's forward steps
-    # failed in its lost dev episodes at 480x640. So the way to a goal keeps this many cells more
-    # from obstacles while the goal stays in reach so, and falls back to the body's growth where
-    # it does not, or only by a detour longer than ``clearance_detour_m`` (a 2-cell growth everywhere
-    # shut Mifflinburg's narrow passages). Frontier costs and reachability keep the body's growth.
+    # heading up to 15 degrees off its path then grazes the wall, and many forward steps fail. So the
+    # way to a goal keeps this many cells more from obstacles while the goal stays in reach so, and
+    # falls back to the body's growth where it does not, or only by a detour longer than
+    # ``clearance_detour_m`` (a 2-cell growth everywhere shuts narrow passages). Frontier costs and
+    # reachability keep the body's growth.
     clearance_cells: int = 1
     clearance_detour_m: float = 1.0
     goal_dilation_m: float = 0.5
@@ -43,13 +43,13 @@ class PlannerConfig:
     collision_mark_max_width_cells: int = 9
     # Approaching the target, marks start one cell wide and widen to five (SemExp's own widths): the
     # floor round a toilet is tight, and a 5-9 cell mark laid after bumping into floor the navmesh lost
-    # closed the walkable passage beside it, 0.1 m from the success region (Forkland/0/1, /0/6).
-    # Exploring keeps the wide marks: narrow ones there cost 0.025-0.04 SR in repeated collisions.
+    # can close the only walkable passage beside it, just short of the success region.
+    # Exploring keeps the wide marks: narrow ones there cost success in repeated collisions.
     collision_mark_target_width_cells: int = 1
     collision_mark_target_max_width_cells: int = 5
     # Even a 1-cell mark closes a passage only as wide as the agent (a toilet's floor the navmesh
-    # eroded to 0.2 m): at 480x640 the plan then led 7 m round through the unknown, 1.2 m from the
-    # toilet, in Forkland/0/1 (lost by frontier, l3mvn-zs and l3mvn-ff). Approaching the target, marks
+    # eroded to 0.2 m), and the plan then leads metres round through the unknown while the target is
+    # almost within reach. Approaching the target, marks
     # that lengthen the way to it by more than this are cleared, at most this many times an episode
     # (a real obstacle is bumped into again and marked again; the stuck signal still counts). Toward
     # any goal, the first failed step of a run whose rectangle lengthens the way so, and which swept

@@ -12,11 +12,9 @@ from l3mvn.core.errors import L3MVNError
 # on to the goal (see l3mvn.agent.policies.language_policy).
 SELECTIONS = ("paper", "official_code", "expected")
 # Feed-forward heads: trained on frontiers of house maps, or on room object lists (the paper's recipe).
-# The default stays the room head: the frontier head's mean regret per choice is lower on the 6 Gibson
-# houses held out from its training (1.034 m against 1.177 m; cost-utility 0.959), but the episodes
-# say otherwise: l3mvn-ff on the 200 dev episodes SR / SPL 0.930 / 0.659 with it against 0.945 / 0.676
-# with the room head, and 0.979 / 0.662 against 0.979 / 0.690 on the 48 of the held-out houses (seed
-# spread +-0.025; docs/benchmarks.md, l3mvn/data/language/MODEL_CARD.md).
+# The default stays the room head: the frontier head's mean regret per choice is lower on houses held
+# out from its training, but whole episodes go no better with it (SR and SPL no higher; numbers:
+# docs/benchmarks.md, l3mvn/data/language/MODEL_CARD.md).
 # "-bag": the same head, data and recipe on a multi-hot bag of objects, without the language model
 # (the ablation that says what MiniLM adds; l3mvn/data/language/MODEL_CARD.md).
 HEAD_KINDS = ("frontiers", "rooms", "frontiers-bag", "rooms-bag")

@@ -14,6 +14,7 @@ from l3mvn.core.config import SimConfig
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.types import Action, Observation, Pose
 from l3mvn.world.episode import Episode
+from l3mvn.world.scenes.scene import SceneMap
 
 
 @runtime_checkable
@@ -49,6 +50,19 @@ class Environment(Protocol):
     @property
     def path_length_m(self) -> float:
         """Distance actually walked since reset (the ``p`` of SPL)."""
+
+
+@runtime_checkable
+class MotionModel(Protocol):
+    """An environment that can say where a forward move would end without making it: planners that
+    look ahead on the true dynamics (the oracle) need it. Both our simulator and the habitat bridge
+    (on its floor's grid) have it."""
+
+    scene: SceneMap
+    cfg: SimConfig
+
+    def forward_result(self, pose: Pose) -> tuple[Pose, float]:
+        """The pose a forward move from ``pose`` ends at, and the metres it moves."""
 
 
 class EpisodeState:

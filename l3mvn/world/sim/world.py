@@ -41,8 +41,8 @@ _MARGIN_GAP_CELLS = 3.2  # d(object) + d(free) of a ring cell; a 2-cell ring sco
 # An object farther than the ring from free floor (a plant in a corner, a tv in a niche, a toilet in a
 # bathroom whose floor the navmesh lost) gets a view corridor: the cells between it and its nearest free
 # floor, up to this far (farther: left as is), and a door-wide passage along it. A slit only as wide
-# as the eroded margin (the first version) showed Gibson toilets from 1-3 cells of the house: the
-# agent mapped the whole floor around them and never saw them.
+# as the eroded margin shows such an object from a few cells of the house only: the agent can map the
+# whole floor around it and never see it.
 _CORRIDOR_MAX_CELLS = 20
 _CORRIDOR_SLACK_CELLS = 1.5
 _CORRIDOR_HALF_WIDTH_CELLS = 8  # a 0.8 m door
@@ -54,8 +54,8 @@ _SPECK_MAX_M2 = 0.04  # smaller than a 20 x 20 cm pillar
 _FURNITURE_MAX_M2 = 1.5
 _FURNITURE_MIN_THICKNESS_M = 0.25  # thinner free-standing pieces are partition walls, kept full height
 # Unlabelled furniture is built to table height, the height at which an item with no labelled
-# furniture below it stands. At 0.9 m (a counter) it rose above the 0.88 m camera and hid every
-# object behind it: toilets behind bathroom partitions were mapped around and never seen.
+# furniture below it stands. At 0.9 m (a counter) it would rise above the 0.88 m camera and hide every
+# object behind it: a toilet behind a bathroom partition would be mapped around and never seen.
 _ITEM_SUPPORT_M = 0.75
 _FURNITURE_HEIGHT_M = _ITEM_SUPPORT_M
 
@@ -300,11 +300,11 @@ def _object_boxes(scene: SceneMap, ceiling: float, corridors: list[Corridor]):
 
     Floor-standing footprints that overlap give the cell to the smaller instance: a chair tucked
     under a table keeps its whole seat, and a toilet drawn inside an oven's footprint stays a toilet
-    instead of vanishing (tallest-wins erased Pomaria's toilet: 0 pixels from 463 poses).
+    instead of vanishing (tallest-wins would erase it: no pose would ever see it).
     Another object standing in a goal object's view corridor is cut to ``_OCCLUDER_BELOW_M`` under
     the goal's top (never below its own stand), so a plant behind a sink shows over it. Items
-    stack on the winner's top, except on a goal object or in its corridor (Marstons: a vase drawn
-    over a plant stacked on it and ringed it at 1.05 m, burying it); wall items hang above both.
+    stack on the winner's top, except on a goal object or in its corridor (a vase drawn over a plant
+    would stack on it and ring it, burying it); wall items hang above both.
     """
     profiles = [category_profile(c) for c in scene.categories]
     shape = scene.shape

@@ -7,8 +7,8 @@ Four heads share that architecture (``HEAD_KINDS``, chosen with ``head=``, a kin
   goals (temperature 1) is p(goal), and only informative objects enter the sentence.
 - ``frontiers``: trained on frontiers of house maps (``l3mvn.agent.language.frontier_head``); its outputs
   are the expected metres from the frontier to each goal (``expected_distance``), and every mapped
-  category enters the sentence (the file's ``object_filter``: the data showed couch, vase, book and
-  clock, none of them informative for rooms, moving a toilet 1-2 m away). p(goal) =
+  category enters the sentence (the file's ``object_filter``: objects that say nothing about a room,
+  such as a couch, a vase, a book or a clock, still say how far a goal lies beyond a frontier). p(goal) =
   softmax over goals of -metres / ``distance_temperature_m``: which goal lies nearest through it.
 - ``rooms-bag``, ``frontiers-bag``: the same heads trained the same way on a multi-hot bag of the
   objects (``head.bag_features``) instead of the sentence embedding: the ablation without the
