@@ -16,7 +16,8 @@ pytest.importorskip("embreex")
 
 from l3mvn.run.cli import main  # noqa: E402
 from l3mvn.world.datasets import load_episode_set  # noqa: E402
-from l3mvn.world.datasets.hm3d_export import HM3D_GOAL_NAMES, export_hm3d  # noqa: E402
+from l3mvn.world.datasets.hm3d_export import export_hm3d  # noqa: E402
+from l3mvn.world.datasets.objectnav_files import HM3D_GOAL_NAMES  # noqa: E402
 from l3mvn.world.datasets.objectnav import FORMAT_RULES, dataset_rule, detect_format  # noqa: E402
 from l3mvn.core.config import SUCCESS_RULES  # noqa: E402
 from l3mvn.core.errors import L3MVNError  # noqa: E402

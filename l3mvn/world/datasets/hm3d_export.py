@@ -8,19 +8,19 @@ by the tests themselves, and the same episode can run on habitat-sim and on our 
     OUT/scene_datasets/hm3d_v0.2/<split>/00000-<name>/<name>.semantic.glb   object colours, painted texture
     OUT/scene_datasets/hm3d_v0.2/<split>/00000-<name>/<name>.semantic.txt   id,HEX,"name",region
     OUT/objectnav_hm3d_v2/<split>/<split>.json.gz                           category tables
-    OUT/objectnav_hm3d_v2/<split>/content/<name>.json.gz                    episodes, goals_by_category
+    OUT/objectnav_hm3d_v2/<split>/content/<name>.json.gz                    episodes, goal instances
 
-A house of ``floors`` storeys stacks that many procedural floors ``STOREY_M`` apart (no stairs:
-every episode starts on its goal's floor). View points are habitat's: positions on the floor from
-which a goal instance is within ``success_distance_m`` (geodesic), on a ``VIEW_POINT_STEP_CELLS``
-lattice; ``info.geodesic_distance`` is the geodesic from the start to the nearest one, measured on
-the procedural map (the other simulator's ground truth, which the scan reader re-measures).
+The episode files are written by ``objectnav_files``, which owns their format. A house of
+``floors`` storeys stacks that many procedural floors ``STOREY_M`` apart (no stairs: every episode
+starts on its goal's floor). View points are habitat's: positions on the floor from which a goal
+instance is within ``success_distance_m`` (geodesic), on a ``VIEW_POINT_STEP_CELLS`` lattice; an
+episode's geodesic distance is the geodesic from the start to the nearest one, measured on the
+procedural map (the other simulator's ground truth, which the scan reader re-measures).
 """
 
 from __future__ import annotations
 
 import argparse
-import gzip
 import json
 import math
 from dataclasses import dataclass
@@ -30,6 +30,8 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from l3mvn.core.config import Config, TaskConfig
+from l3mvn.world.datasets.objectnav_files import (EpisodeRecord, GoalRecord, content_dir, write_scene_file,
+                                                  write_split_file)
 from l3mvn.world.episodes import generate_episodes
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.paths import plain_name
@@ -47,9 +49,6 @@ VIEW_POINT_STEP_CELLS = 2  # 0.1 m, habitat's view-point spacing
 _PALETTE_BLOCK = 8  # texels per palette colour: nearest sampling at a block's centre is exact
 SCENE_DIR = Path("scene_datasets") / "hm3d_v0.2"
 EPISODE_DIR = Path("objectnav_hm3d_v2")
-# Our goal category -> HM3D's episode name (the inverse of categories.GOAL_NAMES for HM3D's six).
-HM3D_GOAL_NAMES: dict[str, str] = {"chair": "chair", "couch": "sofa", "potted plant": "plant", "bed": "bed",
-                                   "toilet": "toilet", "tv": "tv_monitor"}
 
 
 @dataclass(frozen=True)
@@ -71,8 +70,8 @@ def export_hm3d(out: str | Path, houses: int, *, seed: int = 0, split: str = "va
     plain_name(split, "--split", "val")
     cfg = cfg or Config()
     out = Path(out)
-    scene_root, episode_root = out / SCENE_DIR, out / EPISODE_DIR / split
-    make_folder(episode_root / "content", "--out")
+    scene_root, dataset = out / SCENE_DIR, out / EPISODE_DIR
+    make_folder(content_dir(dataset, split), "--out")
     make_folder(scene_root / split, "--out")
     _write_dataset_config(scene_root)
     maps = procedural_split(houses * floors, seed)
@@ -85,23 +84,10 @@ def export_hm3d(out: str | Path, houses: int, *, seed: int = 0, split: str = "va
         scene_id = f"hm3d_v0.2/{split}/{folder.name}/{name}.glb"
         goals, walkable = _write_scan(folder, name, storeys, cfg)
         episodes = _episodes(scene_id, storeys, walkable, goals, episodes_per_floor, seed, cfg)
-        _write_gz(episode_root / "content" / f"{name}.json.gz", {
-            "episodes": episodes, "goals_by_category": _goals_by_category(scene_id, goals),
-            **_category_tables(),
-        })
+        write_scene_file(dataset, split, scene_id, episodes, [_goal_record(g) for g in goals])
         total += len(episodes)
-    _write_gz(episode_root / f"{split}.json.gz", {"episodes": [], **_category_tables()})
-    return ExportSummary(out / EPISODE_DIR, out / "scene_datasets", houses, total)
-
-
-def _category_tables() -> dict:
-    names = list(HM3D_GOAL_NAMES.values())
-    return {"category_to_task_category_id": {n: i for i, n in enumerate(names)},
-            "category_to_mp3d_category_id": {n: i + 1 for i, n in enumerate(names)}}
-
-
-def _write_gz(path: Path, data: dict) -> None:
-    write_file(path, gzip.compress(json.dumps(data).encode()), "episode file")
+    write_split_file(dataset, split)
+    return ExportSummary(dataset, out / "scene_datasets", houses, total)
 
 
 def _write_dataset_config(root: Path) -> None:
@@ -120,8 +106,13 @@ class _Goal:
     category: str  # ours
     storey: int
     position: tuple[float, float, float]
-    view_points: np.ndarray  # (n, 3) habitat positions
+    views: np.ndarray  # (n, 3) habitat positions of its view points
     view_cells: np.ndarray  # (n, 2) rows, cols on the storey's map
+
+
+def _goal_record(goal: _Goal) -> GoalRecord:
+    return GoalRecord(goal.object_id, goal.category, tuple((float(x), float(y), float(z)) for x, y, z in goal.views),
+                      goal.position)
 
 
 def _habitat(scene: SceneMap, x: np.ndarray, y: np.ndarray, level: float) -> np.ndarray:
@@ -286,10 +277,10 @@ def _instance_goals(scene: SceneMap, walkable: np.ndarray, labels: np.ndarray, n
 
 
 def _episodes(scene_id: str, storeys: list[SceneMap], walkables: list[np.ndarray], goals: list[_Goal],
-              per_floor: int, seed: int, cfg: Config) -> list[dict]:
-    """Episodes in habitat's schema: starts from our generator where the exported geometry is
-    navigable, the geodesic to the nearest view point over that geometry's traversible cells."""
-    records = []
+              per_floor: int, seed: int, cfg: Config) -> list[EpisodeRecord]:
+    """Episodes as habitat's files give them: starts from our generator where the exported geometry
+    is navigable, the geodesic to the nearest view point over that geometry's traversible cells."""
+    records: list[EpisodeRecord] = []
     for s, scene in enumerate(storeys):
         walkable = walkables[s]
         passable = ndi.binary_dilation(walkable, disk(scene.traversible_dilation_cells))
@@ -309,38 +300,16 @@ def _episodes(scene_id: str, storeys: list[SceneMap], walkables: list[np.ndarray
             distance = float(to_view[cell])
             if not (walkable[cell] and math.isfinite(distance)):
                 continue
-            position, rotation_wxyz = scene.pose_to_habitat(ep.start)
+            position, (w, x, y, z) = scene.pose_to_habitat(ep.start)
             position[1] = s * STOREY_M
-            w, x, y, z = rotation_wxyz
             start = np.array(position)
-            records.append({
-                "episode_id": str(ep.episode_id), "scene_id": scene_id, "start_position": position,
-                "start_rotation": [x, y, z, w], "info": {
-                    "geodesic_distance": round(distance, 4),
-                    "euclidean_distance": round(float(min(np.linalg.norm(g.view_points - start, axis=1).min()
-                                                          for g in by_category[ep.goal])), 4),
-                    "closest_goal_object_id": int(min(by_category[ep.goal], key=lambda g: np.linalg.norm(
-                        g.view_points - start, axis=1).min()).object_id),
-                },
-                "goals": [], "start_room": None, "shortest_paths": None,
-                "object_category": HM3D_GOAL_NAMES[ep.goal],
-            })
+            nearest = [float(np.linalg.norm(g.views - start, axis=1).min()) for g in by_category[ep.goal]]
+            records.append(EpisodeRecord(
+                ep.episode_id, scene_id, (position[0], position[1], position[2]), (w, x, y, z), ep.goal,
+                geodesic_m=round(distance, 4), euclidean_m=round(min(nearest), 4),
+                closest_object_id=int(by_category[ep.goal][int(np.argmin(nearest))].object_id),
+            ))
     return records
-
-
-def _goals_by_category(scene_id: str, goals: list[_Goal]) -> dict[str, list[dict]]:
-    base = Path(scene_id).name
-    out: dict[str, list[dict]] = {}
-    for g in goals:
-        name = HM3D_GOAL_NAMES[g.category]
-        out.setdefault(f"{base}_{name}", []).append({
-            "position": list(g.position), "radius": None, "object_id": g.object_id,
-            "object_name": f"{g.category}_{g.object_id}", "object_name_id": None, "object_category": name,
-            "room_id": None, "room_name": None,
-            "view_points": [{"agent_state": {"position": [float(v) for v in p], "rotation": [0.0, 0.0, 0.0, 1.0]},
-                             "iou": 1.0} for p in g.view_points],
-        })
-    return out
 
 
 # --- the command ---------------------------------------------------------------------------------
