@@ -12,7 +12,7 @@ from scipy import ndimage as ndi
 
 from l3mvn.run.cli import main
 from l3mvn.core.config import Config
-from l3mvn.run.eval.audit import REASONS, AuditConfig, FloorAuditor, audit_floor, audit_split
+from l3mvn.run.audit import REASONS, AuditConfig, FloorAuditor, audit_floor, audit_split
 from l3mvn.world.task.regions import footprint_region, goal_region
 from l3mvn.core.grid import disk
 from l3mvn.core.categories import GIBSON_CATEGORIES

@@ -30,7 +30,8 @@ LAYERS: dict[str, list[set[str]]] = {
     "world": [{"episode", "scenes"}, {"sim"}, {"task"}, {"episodes"}, {"datasets"}, {"baselines"}],
     "agent": [{"decision", "mapping", "frontiers", "planning", "language"}, {"perception", "looking"},
               {"policies"}, {"modular"}],
-    "run": [{"events", "viz", "serving"}, {"session"}, {"registry"}, {"runner", "recording"}, {"eval"}, {"cli"}],
+    "run": [{"events", "viz", "serving"}, {"session"}, {"registry"}, {"runner", "recording"}, {"eval", "audit"},
+            {"cli"}],
     "studio": [{"*"}],
 }
 # Same-layer imports that are allowed, as (importer, imported).

@@ -296,8 +296,8 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 
 def _cmd_audit(args: argparse.Namespace) -> int:
-    from l3mvn.run.eval.audit import audit_scenes, format_report, load_split_for_audit
     from l3mvn.core.writing import write_file
+    from l3mvn.run.audit import audit_scenes, format_report, load_split_for_audit
 
     if args.frame is not None:
         try:
