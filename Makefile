@@ -1,11 +1,12 @@
-# Two commands a new user needs: `make demo` and `make test`. Both create/refresh .venv first.
+# Two commands a new user needs: `make demo` and `make test`. Both create/refresh .venv first. The exact
+# CPU wheel of torch is pinned here, not in the library (which names a range any torch 2.x meets).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 FIND_LINKS := $(if $(wildcard /opt/wheels),--find-links /opt/wheels,)
 PIP := $(BIN)/pip install --disable-pip-version-check $(FIND_LINKS)
 
-.PHONY: demo test venv clean habitat
+.PHONY: demo test lint venv clean habitat
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -23,7 +24,15 @@ venv: $(VENV)/.installed
 demo: venv
 	$(BIN)/l3mvn serve
 
-test: venv
+# The code checks CI runs before the tests: ruff (lint and format) and mypy (pyproject.toml: strict on
+# l3mvn.core and the agent side).
+CHECKED := l3mvn app tests bench
+lint: venv
+	$(BIN)/ruff check $(CHECKED)
+	$(BIN)/ruff format --check $(CHECKED)
+	$(BIN)/mypy
+
+test: lint
 	HF_HUB_OFFLINE=1 TRANSFORMERS_OFFLINE=1 $(BIN)/python -m pytest -q
 
 # A headless CPU habitat-sim 0.2.2 (~15 min on 2 shared cores, ~1.7 GB) in a cache outside the repository,
