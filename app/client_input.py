@@ -3,18 +3,27 @@
 viser coerces what a tab sends to the control's type (``float("nan")``, ``bool("no")``) and checks
 nothing else, and any page can send any frame; so each update must be one the control itself could
 have produced. Each check returns None, or one line naming the problem and the valid choices, which
-the tab that sent it is shown.
+the tab that sent it is shown. ``UpdateGate`` applies the checks to every GUI update before viser
+does, so a refused one changes nothing.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import reprlib
+from collections.abc import Callable, Iterable, Sequence
 from numbers import Real
-from typing import Any, Sequence
+from typing import Any
 
 import viser
 
+from l3mvn_studio.viser_hooks import handle_uuid, show_value_to
+
+log = logging.getLogger(__name__)
+
+CLICKABLE = (viser.GuiButtonHandle, viser.GuiButtonGroupHandle)  # on_click, not on_update; no value to show
+_INPUTS = (viser.GuiInputHandle, *CLICKABLE)  # every control a tab can send values to
 _SHOWN_CHOICES = 12  # valid choices listed in a notice
 _bounded = reprlib.Repr()
 _bounded.maxstring = _bounded.maxother = 60
@@ -53,6 +62,41 @@ def ray_refusal(origin: Any, direction: Any) -> str | None:
         if not (isinstance(vector, Sequence) and len(vector) == 3 and all(_finite(v) for v in vector)):
             return f"map click ignored: its ray {name} {shown(vector)} is not three finite numbers"
     return None
+
+
+class UpdateGate:
+    """Whether viser may apply a tab's GUI update (``viser_hooks.check_gui_updates``); runs on viser's
+    event loop, before any state changes.
+
+    A refused update changes nothing anywhere: the tab that sent it is told why and shown the value
+    the server holds again; other tabs see nothing. A check that fails refuses too.
+    """
+
+    def __init__(self, server: viser.ViserServer, handles: Iterable[Any], *, busy: Callable[[], str],
+                 tell: Callable[[int, str, str], None]) -> None:
+        """``handles``: the page's controls (anything else in it is skipped); ``busy``: what holds the
+        page's controls now, if anything; ``tell(client_id, text, level)``: a notice to one tab."""
+        self._server, self._busy, self._tell = server, busy, tell
+        self._inputs = {handle_uuid(h): h for h in handles if isinstance(h, _INPUTS)}
+
+    def __call__(self, client_id: int, uuid: str, updates: dict) -> bool:
+        handle = self._inputs.get(uuid)
+        try:
+            problem = ("that control is not on this page" if handle is None
+                       else update_refusal(handle, updates))
+            if problem is None:
+                return True
+            busy = self._busy()
+            if handle is not None and handle.disabled and busy:
+                problem = f"{handle.label} is held while the dashboard is busy ({busy})"
+            log.info("dashboard: refused an update from client %s: %s", client_id, problem)
+            self._tell(client_id, problem, "warning")
+            client = self._server.get_clients().get(client_id)
+            if client is not None and handle is not None and not isinstance(handle, CLICKABLE):
+                show_value_to(client, handle)
+        except Exception:
+            log.exception("dashboard: checking an update from client %s failed; refused it", client_id)
+        return False
 
 
 def _finite(value: Any) -> bool:

@@ -11,7 +11,6 @@ import pytest
 from conftest import serve_dashboard
 from l3mvn_studio.page_text import md
 from l3mvn_studio.state import Notice
-from l3mvn_studio.views import cell_to_xy, ray_to_cell
 from l3mvn.core.config import Config, SimConfig
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.events import StepEvent
@@ -227,13 +226,6 @@ def test_an_exception_in_the_worker_is_shown_and_the_worker_keeps_serving(ctl):
     ctl.step()
     assert ctl.wait_idle()
     assert ctl.snapshot.error is None and ctl.events[-1].step == 1
-
-
-def test_a_click_ray_lands_on_the_map_cell_below_it():
-    x, y = cell_to_xy((40, 25), 0.05)
-    assert ray_to_cell((x, y, 10.0), (0.0, 0.0, -1.0), 0.05) == (40, 25)
-    assert ray_to_cell((x, y, 10.0), (0.0, 0.0, 1.0), 0.05) is None  # looking away from the map
-    assert ray_to_cell((x, y, 1e308), (1e308, 0.0, -1e-300), 0.05) is None  # meets the plane at infinity
 
 
 def test_the_page_is_served(dash):

@@ -36,7 +36,7 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt inst
                                                          "`playwright install chromium` runs these tests")
 
 from conftest import serve_dashboard
-from l3mvn_studio.views import cell_to_xy  # noqa: E402
+from l3mvn_studio.scene_drawing import cell_to_xy  # noqa: E402
 from l3mvn.core.config import Config  # noqa: E402
 
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",

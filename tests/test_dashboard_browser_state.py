@@ -27,7 +27,7 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt inst
 
 from l3mvn_studio.model_weights import scorer_problems  # noqa: E402
 from l3mvn_studio.server import start_dashboard  # noqa: E402
-from l3mvn_studio.views import NOTICE_SECONDS  # noqa: E402
+from l3mvn_studio.tab_notices import NOTICE_SECONDS  # noqa: E402
 from l3mvn.core.config import Config  # noqa: E402
 
 
@@ -215,17 +215,17 @@ def test_the_ground_truth_toggle_draws_the_goal_and_clears_it(dash, page):
     canvas = page.locator("canvas").first
     before = canvas.screenshot()
     page.get_by_text("Ground truth", exact=True).click()
-    _wait(lambda: dash.view.gt_plane.visible, what="the ground-truth layer")
+    _wait(lambda: dash.view.map_scene.gt_plane.visible, what="the ground-truth layer")
     _wait(lambda: "GROUND TRUTH" in _panel_text(page) or "ground truth: goal instances" in _panel_text(page),
           what="the layer marked as ground truth")
     assert "ground truth: goal instances" in _panel_text(page)  # its legend
-    assert dash.view.gt_label.text.startswith(f"GROUND TRUTH: {ctl.snapshot.event.goal}")
+    assert dash.view.map_scene.gt_label.text.startswith(f"GROUND TRUTH: {ctl.snapshot.event.goal}")
     time.sleep(1.0)
     shown = canvas.screenshot()
     assert shown != before, "the ground truth changed nothing on the map"
     page.screenshot(path=str(page.shots / "dashboard_ground_truth.png"))
     page.get_by_text("Ground truth", exact=True).click()
-    _wait(lambda: not dash.view.gt_plane.visible, what="the layer cleared")
+    _wait(lambda: not dash.view.map_scene.gt_plane.visible, what="the layer cleared")
     _wait(lambda: "ground truth: goal instances" not in _panel_text(page), what="its legend cleared")
 
 

@@ -13,13 +13,12 @@ import numpy as np
 import pytest
 
 from conftest import serve_dashboard
+from l3mvn_studio.frontier_ranking import TOP_LABELS, labelled_frontiers
 from l3mvn_studio.map_image import TARGET_RINGS
 from l3mvn_studio.model_weights import model_problem, scorer_problems
+from l3mvn_studio.page_markdown import legend_html, status_markdown
 from l3mvn_studio.session_worker import DashboardController
 from l3mvn_studio.state import Notice, Snapshot
-from l3mvn_studio.views import (
-    TOP_LABELS, _labelled_frontiers, _legend_html, _no_map_markdown, _status_markdown,
-)
 from l3mvn.core.config import Config, SimConfig
 from l3mvn.world.datasets import load_episode_set
 from l3mvn.core.errors import L3MVNError
@@ -89,7 +88,7 @@ def test_the_last_snapshot_of_a_run_says_finished_not_running(ctl):
     assert ctl.wait_idle()
     last = ctl.snapshot
     assert last.event.done and not last.running
-    assert "finished" in _status_markdown(last) and "running" not in _status_markdown(last).split("\n")[0]
+    assert "finished" in status_markdown(last) and "running" not in status_markdown(last).split("\n")[0]
     # Every snapshot that shows the finished step says so: none pairs SUCCESS with "running".
     assert not [s for s in ctl.snaps if s.event is not None and s.event.done and s.running]
 
@@ -177,12 +176,12 @@ def test_a_manual_goal_reads_as_a_frontier_and_goes_with_clear(ctl):
     ctl.set_manual_goal(target.cell)
     ctl.step()
     assert ctl.wait_idle()
-    text = _status_markdown(ctl.snapshot)
+    text = status_markdown(ctl.snapshot)
     assert f"**Manual goal**: frontier F{target.id} at map cell ({target.cell[0]}, {target.cell[1]})" in text
     assert "manual:" not in text
     ctl.set_manual_goal(None)
     assert ctl.wait_idle()
-    text = _status_markdown(ctl.snapshot)  # before the next step
+    text = status_markdown(ctl.snapshot)  # before the next step
     assert "Manual goal" not in text and "manual goal cleared" in text
 
 
@@ -196,7 +195,7 @@ def test_the_target_is_ringed_on_the_map_and_first_in_the_legend(ctl):
         assert (img == ring).all(axis=2).any(), f"no {ring} ring around the target"
     names = [name for name, _ in view.legend]
     assert view.target in names and len(names) == len(set(names))
-    html = _legend_html(view.legend, target=view.target)
+    html = legend_html(view.legend, target=view.target)
     assert f"<b>{view.target} (target)</b>" in html
     assert html.index(view.target) < min(html.index(n) for n in names if n != view.target)
 
@@ -212,21 +211,15 @@ def test_map_labels_name_only_the_best_few_frontiers(ctl):
             break
     frontiers = ctl.snapshot.map.frontiers
     assert len(frontiers) > TOP_LABELS + 1
-    labelled = _labelled_frontiers(frontiers)
+    labelled = labelled_frontiers(frontiers)
     assert len(labelled) <= TOP_LABELS + 1 and {f.id for f in frontiers if f.chosen} <= labelled
-
-
-def test_before_any_reset_a_map_policy_is_not_said_to_keep_no_map():
-    assert "keeps no map" not in _no_map_markdown("frontier", started=False)
-    assert "frontiers appear after Reset" in _no_map_markdown("l3mvn-zs", started=False)
-    assert "keeps no map" in _no_map_markdown("random-walk", started=False)
 
 
 def test_random_walk_says_it_is_the_papers_baseline(ctl):
     ctl.policy_name = "random-walk"
     ctl.reset(ctl.scene_keys[0], 0)
     assert ctl.wait_idle()
-    assert "the paper's baseline" in _status_markdown(ctl.snapshot)
+    assert "the paper's baseline" in status_markdown(ctl.snapshot)
 
 
 def test_the_legend_swatches_are_told_apart():
@@ -280,67 +273,3 @@ def test_teleop_refuses_to_act_on_its_own():
     agent = TeleopAgent(GLOBAL_POLICIES["cost-utility"](), ("chair",), SMALL)
     with pytest.raises(L3MVNError, match="acts only when driven"):
         agent.act(None)
-
-
-def test_the_agents_collision_marks_show_on_its_map_in_their_own_legend_colour():
-    """Forkland/0/6: marks laid on floor the map shows free closed the way to a seen toilet, and
-    nothing on the page showed them. They are painted over free floor, in a colour no category has."""
-    from l3mvn_studio.map_image import FREE, agent_map_view
-    from l3mvn.run.viz import COLLISION_RGB
-    from l3mvn.world.scenes.categories import SCAN_CATEGORIES
-    from l3mvn.world.scenes.procedural import PROCEDURAL_CATEGORIES
-    from l3mvn.agent.decision import Decision
-    from l3mvn.agent.mapping import SemanticMap
-    from l3mvn.core.types import Action
-
-    n = 80
-    explored = np.zeros((n, n), bool)
-    explored[20:60, 20:60] = True
-    sem_map = SemanticMap(obstacle=np.zeros((n, n), bool), explored=explored, visited=np.zeros((n, n), bool),
-                          categories=np.zeros((1, n, n), bool), category_names=("toilet",), looked=explored,
-                          resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=(40, 40), agent_heading=0.0,
-                          local_cells=n, footprint_radius_cells=3)
-    marks = np.array([[40, 43], [41, 43], [39, 43]], np.int32)
-    view = agent_map_view(Decision(action=Action.MOVE_FORWARD, map=sem_map, collision_marks=marks))
-    r0, c0 = view.origin
-
-    def pixel(r: int, c: int) -> tuple:
-        return tuple(view.image[(r - r0) * view.scale, (c - c0) * view.scale])
-
-    assert all(pixel(r, c) == COLLISION_RGB for r, c in marks) and pixel(40, 50) == FREE
-    assert "collision marks" in _legend_html(view.legend)
-    colours = np.array([category_color(name) for name in PROCEDURAL_CATEGORIES + SCAN_CATEGORIES], float)
-    assert np.linalg.norm(colours - np.array(COLLISION_RGB, float), axis=1).min() > 40
-
-
-def test_guessed_obstacles_show_apart_from_seen_ones_in_their_own_legend_colour():
-    """An obstacle guessed from depth too near to read may close a doorway the agent then avoids: the
-    map must show which obstacles are guesses."""
-    from l3mvn_studio.map_image import GUESSED, OBSTACLE, agent_map_view
-    from l3mvn.world.scenes.categories import SCAN_CATEGORIES
-    from l3mvn.world.scenes.procedural import PROCEDURAL_CATEGORIES
-    from l3mvn.agent.decision import Decision
-    from l3mvn.agent.mapping import SemanticMap
-    from l3mvn.core.types import Action
-
-    n = 80
-    explored = np.zeros((n, n), bool)
-    explored[20:60, 20:60] = True
-    obstacle, inferred = np.zeros((n, n), bool), np.zeros((n, n), bool)
-    obstacle[30, 30:50] = True
-    inferred[50, 30:50] = obstacle[50, 30:50] = True
-    sem_map = SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros((n, n), bool),
-                          categories=np.zeros((1, n, n), bool), category_names=("toilet",), looked=explored,
-                          resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=(40, 40), agent_heading=0.0,
-                          local_cells=n, footprint_radius_cells=3, inferred=inferred)
-    view = agent_map_view(Decision(action=Action.MOVE_FORWARD, map=sem_map))
-    r0, c0 = view.origin
-
-    def pixel(r: int, c: int) -> tuple:
-        return tuple(view.image[(r - r0) * view.scale, (c - c0) * view.scale])
-
-    assert pixel(30, 40) == OBSTACLE and pixel(50, 40) == GUESSED
-    assert "guessed" in _legend_html(view.legend)
-    colours = np.array([category_color(name) for name in PROCEDURAL_CATEGORIES + SCAN_CATEGORIES], float)
-    assert np.linalg.norm(colours - np.array(GUESSED, float), axis=1).min() > 40
-    assert sem_map.copy().inferred[50, 40] and sem_map.copy().inferred is not inferred
