@@ -298,6 +298,7 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 def _cmd_audit(args: argparse.Namespace) -> int:
     from l3mvn.core.writing import write_file
     from l3mvn.run.audit import audit_scenes, format_report, load_split_for_audit
+    from l3mvn.world.episode import Episode
 
     if args.frame is not None:
         try:
@@ -306,7 +307,8 @@ def _cmd_audit(args: argparse.Namespace) -> int:
             raise L3MVNError(f"--frame: {exc}") from None
     cfg = _config(args)
     if args.dataset is None:
-        source, split, episodes = "procedural", "-", []
+        source, split = "procedural", "-"
+        episodes: list[Episode] = []
         _, scenes = _scenes(args)
         if args.scene is not None:
             if args.scene not in scenes:
@@ -337,6 +339,7 @@ def _progress_floors(total: int):
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:
+    from l3mvn.world.episode import Episode
     from l3mvn.world.episodes import episode_file, generate_episodes, write_episode_file
     from l3mvn.core.paths import plain_name
     from l3mvn.world.scenes.semexp import info_path, save_split, to_semexp_channels
@@ -358,7 +361,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
             maps.symlink_to(src)
     total = 0
     for name in sorted(scenes):
-        episodes = []
+        episodes: list[Episode] = []
         for floor, scene in sorted(scenes[name].items()):
             episodes += generate_episodes(scene, args.per_scene, seed=args.seed, first_id=len(episodes),
                                           min_distance_m=args.min_distance, max_distance_m=args.max_distance)

@@ -213,8 +213,9 @@ def make_policy(name: str, env: Environment, task: ObjectNavTask, config: Config
     policy, see ``check_options``); only a ground-truth spec is handed ``env`` and ``task``."""
     check_options(name, config.policy)
     spec = policy_spec(name)
-    world = {"env": env, "task": task} if spec.ground_truth else {}
-    return spec.build(PolicyContext(tuple(env.categories), config, seed, **world))
+    world = spec.ground_truth
+    return spec.build(PolicyContext(tuple(env.categories), config, seed,
+                                    env=env if world else None, task=task if world else None))
 
 
 # TEMPORARY (removed once the dashboard reads the functions above)

@@ -155,6 +155,7 @@ class EpisodeSession:
     # --- internals ---------------------------------------------------------------------------
     def _ground_truth(self) -> dict[str, float]:
         env, task, ep = self.env, self.task, self.episode
+        assert ep is not None  # published only while an episode runs
         return {
             "distance_to_goal_m": task.distance_to_goal(env.pose, ep.goal),
             "path_length_m": env.path_length_m,

@@ -16,8 +16,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from l3mvn.world.sim.base import MotionModel
-from l3mvn.core.types import Action, Observation, Pose, wrap_angle
-from l3mvn.world.episode import Episode
+from l3mvn.core.types import Action, EpisodeBrief, Observation, Pose, wrap_angle
 from l3mvn.world.task import GoalRegion, ObjectNavTask, geodesic_field
 
 _NEIGHBOURS = np.array([(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)])
@@ -43,7 +42,7 @@ class OraclePolicy:
         self._field: np.ndarray | None = None
         self._plan: list[Action] = []  # the searched way into the region, popped from the end
 
-    def reset(self, episode: Episode) -> None:
+    def reset(self, episode: EpisodeBrief) -> None:
         self.change_target(episode.goal)
 
     def change_target(self, goal: str) -> None:
@@ -134,6 +133,7 @@ class OraclePolicy:
         """The cell ``lookahead_cells`` steps down the distance field from (r, c), following the
         lowest neighbour (stops early at the region or a local minimum)."""
         field = self._field
+        assert field is not None  # act() runs only after reset() set the goal's field
         h, w = field.shape
         for _ in range(self.lookahead_cells):
             around = np.array([r, c]) + _NEIGHBOURS
@@ -146,6 +146,7 @@ class OraclePolicy:
         return r, c
 
     def _value(self, x: float, y: float) -> float:
+        assert self._field is not None  # act() runs only after reset() set the goal's field
         r, c = self.env.scene.cell_of(x, y)
         return float(self._field[r, c]) if self.env.scene.in_bounds(r, c) else math.inf
 
@@ -200,7 +201,7 @@ class RandomWalkPolicy:
         self.seed = seed
         self._rng = np.random.default_rng(seed)
 
-    def reset(self, episode: Episode) -> None:
+    def reset(self, episode: EpisodeBrief) -> None:
         # Seeded by episode, not by order, so results do not depend on scheduling.
         self._rng = np.random.default_rng([self.seed, episode.episode_id, zlib.crc32(episode.scene.encode())])
 

@@ -13,6 +13,7 @@ import numbers
 import reprlib
 import zlib
 from pathlib import Path
+from typing import TypeGuard
 
 import numpy as np
 from scipy import ndimage as ndi
@@ -133,9 +134,10 @@ def _floor_of(where: str, rec: dict, floors: dict[int, SceneMap]) -> SceneMap:
     """The map of the record's ``floor_id`` (0 when absent, as in single-floor SemExp files)."""
     valid = ", ".join(map(str, sorted(floors))) or "none"
     raw = rec.get("floor_id", 0)
-    if _as_whole(raw) not in floors:
+    floor = _as_whole(raw)
+    if floor is None or floor not in floors:
         raise L3MVNError(f"{where}: floor_id must be a floor of this scene (a whole number: {valid}), got {_show(raw)}")
-    return floors[_as_whole(raw)]
+    return floors[floor]
 
 
 def _check_scene_id(where: str, path: Path, rec: dict, scene: SceneMap) -> None:
@@ -201,7 +203,7 @@ def _geodesic(where: str, info: object) -> float:
     return metres
 
 
-def _is_number(value: object) -> bool:
+def _is_number(value: object) -> TypeGuard[int | float]:
     """A JSON number: int or float, never a bool (``true`` is an int to Python) or a numeric string."""
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 

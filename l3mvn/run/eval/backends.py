@@ -19,10 +19,11 @@ import sys
 import threading
 import time
 from collections import Counter, deque
+from collections.abc import Generator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
-from typing import Iterable, Iterator
+from typing import Iterable
 
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.eval.job import EvalJob, error_row
@@ -31,7 +32,8 @@ _PR_SET_PDEATHSIG = 1
 _STOP_GRACE_S = 5.0
 
 
-def run_local(job: EvalJob, keys: Iterable[str], workers: int, *, max_retries: int = 1) -> Iterator[dict]:
+def run_local(job: EvalJob, keys: Iterable[str], workers: int, *,
+              max_retries: int = 1) -> Generator[dict, None, None]:
     """One result row per key, in completion order; ``workers=1`` runs in this process. Arguments are
     checked now, workers start on the first ``next()``.
 
@@ -60,8 +62,9 @@ class _Pool:
         self.job, self.size, self.max_retries = job, size, max_retries
         self.ctx = _context()
 
-    def run(self, keys: list[str]) -> Iterator[dict]:
-        self.pending, self.strikes = deque(keys), Counter()
+    def run(self, keys: list[str]) -> Generator[dict, None, None]:
+        self.pending = deque(keys)
+        self.strikes: Counter[str] = Counter()
         self.workers: list[_Worker] = []
         with interrupt_on_sigterm():
             try:
@@ -110,7 +113,7 @@ class _Pool:
         return _Worker(process, parent)
 
 
-def _context() -> mp.context.BaseContext:
+def _context() -> mp.context.SpawnContext | mp.context.ForkServerContext:
     if "forkserver" not in mp.get_all_start_methods():
         return mp.get_context("spawn")
     ctx = mp.get_context("forkserver")

@@ -9,7 +9,7 @@ result and is named at the end. Ctrl-C keeps every finished episode.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Generator
 from contextlib import closing
 from dataclasses import dataclass, field
 from typing import TextIO
@@ -52,7 +52,7 @@ def evaluate(job: EvalJob, episodes: list[Episode], *, out: str | None = None, r
             _say(stream, writer.repair)
         if resume:
             previous = writer.previous(job.policy, job.config_hash, rule)
-            if report := previous.report(out):
+            if out is not None and (report := previous.report(out)):
                 _say(stream, report)
             run.rows = {key: row for key, row in previous.rows.items() if key in wanted}
         todo = [ep.key for ep in episodes if ep.key not in run.rows]
@@ -72,7 +72,8 @@ def evaluate(job: EvalJob, episodes: list[Episode], *, out: str | None = None, r
     return run
 
 
-def _rows(job: EvalJob, todo: list[str], backend: str, workers: int | None, address: str | None) -> Iterator[dict]:
+def _rows(job: EvalJob, todo: list[str], backend: str, workers: int | None,
+          address: str | None) -> Generator[dict, None, None]:
     if backend == "ray":
         from l3mvn.run.eval.ray_backend import run_ray
 

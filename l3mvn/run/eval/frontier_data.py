@@ -78,7 +78,7 @@ def window_object_distances(frontier: Frontier, sem_map: SemanticMap, half_cells
     return dict(sorted(out.items(), key=lambda kv: (kv[1], kv[0])))
 
 
-def label_frontiers(frontiers: Sequence[Frontier], sem_map: SemanticMap, goal_fields: dict[str, GoalRegion],
+def label_frontiers(frontiers: list[Frontier], sem_map: SemanticMap, goal_fields: dict[str, GoalRegion],
                     half_cells: int) -> list[dict]:
     """One record per frontier: the agent's view of it plus the ground-truth metres from it to every
     goal in ``goal_fields`` (``None`` for a goal whose instances it has no path to, or that the house
@@ -96,7 +96,7 @@ def label_frontiers(frontiers: Sequence[Frontier], sem_map: SemanticMap, goal_fi
             "id": f.id, "center": [int(f.center[0]), int(f.center[1])], "size": int(f.size),
             "distance_m": round(f.distance_m, 3), "cost": round(f.cost, 3), "utility": round(f.utility, 3),
             "s_cu": round(f.s_cu, 4), "objects": {k: round(v, 2) for k, v in objects.items()},
-            "query": frontier_query(objects), "goal_m": goal_m,
+            "query": frontier_query(tuple(objects)), "goal_m": goal_m,
         })
     return out
 
@@ -152,7 +152,7 @@ def _walk(job: FrontierDataJob) -> tuple[str, int, list[dict]]:
     return ep.key, job.seed, rows
 
 
-def read_done(path: Path) -> tuple[set[tuple[str, int]], list[str]]:
+def read_done(path: Path) -> tuple[set[tuple[str, int | None]], list[str]]:
     """(finished (episode, seed) pairs, the lines to keep): the lines of an episode without its
     ``done`` line, and a last line cut off mid-write, are dropped."""
     if not path.exists():
@@ -198,7 +198,8 @@ def generate_frontier_data(dataset: str, split: str, out: str | Path, *, seeds: 
         unknown = sorted(set(houses) - set(known))
         if unknown:
             raise L3MVNError(f"unknown house(s) {', '.join(unknown)}; valid: {', '.join(known)}")
-    indices, per_house = [], {}
+    indices: list[int] = []
+    per_house: dict[str, int] = {}
     for i, ep in enumerate(eset.episodes):
         if houses and ep.scene not in houses:
             continue
@@ -210,16 +211,16 @@ def generate_frontier_data(dataset: str, split: str, out: str | Path, *, seeds: 
     if not resume and out.exists() and out.stat().st_size:
         raise L3MVNError(f"{out} exists; pass --resume to continue it or choose another --out")
     write_file(out, "".join(line + "\n" for line in keep), "--out")
-    jobs = [FrontierDataJob(str(dataset), split, i, s, policy, tuple(frame), episodes_per_house)
+    height, width = frame
+    jobs = [FrontierDataJob(str(dataset), split, i, s, policy, (height, width), episodes_per_house)
             for s in seeds for i in indices if (eset.episodes[i].key, s) not in done]
     total, finished = len(jobs), 0
     if progress:
         progress(0, total)
     with out.open("a") as fh:
-        results = map(_walk, jobs) if workers == 1 else None
         pool = None if workers == 1 else get_context("forkserver").Pool(workers)
         try:
-            results = results if pool is None else pool.imap(_walk, jobs)
+            results = map(_walk, jobs) if pool is None else pool.imap(_walk, jobs)
             for key, seed, rows in results:
                 block = [json.dumps(r, separators=(",", ":")) for r in rows]
                 block.append(json.dumps({"done": key, "seed": seed, "choices": len(rows)}))

@@ -20,6 +20,7 @@ import os
 import subprocess
 import sys
 from collections import Counter, deque
+from collections.abc import Generator
 from contextlib import contextmanager, suppress
 from typing import Callable, Iterable, Iterator
 
@@ -29,7 +30,7 @@ from l3mvn.run.eval.job import EvalJob, error_row
 
 
 def run_ray(job: EvalJob, keys: Iterable[str], address: str | None = None, num_workers: int | None = None,
-            max_retries: int = 2) -> Iterator[dict]:
+            max_retries: int = 2) -> Generator[dict, None, None]:
     """One result row per key, in completion order. Arguments are checked now (Ray missing raises
     L3MVNError), Ray is started or joined on the first ``next()``.
 
@@ -48,7 +49,7 @@ def run_ray(job: EvalJob, keys: Iterable[str], address: str | None = None, num_w
 
 
 def _run(ray, job: EvalJob, keys: list[str], address: str | None, num_workers: int | None,
-         max_retries: int) -> Iterator[dict]:
+         max_retries: int) -> Generator[dict, None, None]:
     if not keys:
         return
     leave = _connect(ray, address, num_workers)
@@ -85,7 +86,8 @@ class EpisodeActor:
 def _schedule(ray, job: EvalJob, keys: list[str], actors: list, actor_cls, max_retries: int) -> Iterator[dict]:
     from ray.exceptions import RayActorError, RayError
 
-    pending, strikes = deque(keys), Counter()
+    pending = deque(keys)
+    strikes: Counter[str] = Counter()
     in_flight: dict = {}  # ObjectRef -> (actor, key)
 
     def submit(actor) -> None:
@@ -238,6 +240,7 @@ class _Reaper:
         """Narrow the watch from every new child of the driver to those ``ray.init`` started."""
         started = [child.pid for child in self._driver.children()
                    if child.pid not in self._before and child.pid != self._proc.pid]
+        assert self._proc.stdin is not None  # opened with stdin=PIPE
         try:
             self._proc.stdin.write(" ".join(map(str, started)) + "\n")
             self._proc.stdin.flush()
@@ -246,6 +249,7 @@ class _Reaper:
                              f"{self._proc.poll()}); not running without it") from None
 
     def close(self) -> None:
+        assert self._proc.stdin is not None  # opened with stdin=PIPE
         with suppress(OSError):
             self._proc.stdin.close()
         with suppress(subprocess.TimeoutExpired):

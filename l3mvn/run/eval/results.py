@@ -38,7 +38,7 @@ import time
 from contextlib import suppress
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, BinaryIO, Callable, Iterable, Iterator
+from typing import IO, Any, BinaryIO, Callable, Iterable, Iterator
 
 from l3mvn.core.config import SUCCESS_RULES
 from l3mvn.core.json_values import json_safe
@@ -171,7 +171,7 @@ def _depth(value: Any) -> int:
     return deepest
 
 
-def read_lines(fh: BinaryIO) -> Iterator[ResultLine]:
+def read_lines(fh: IO[bytes]) -> Iterator[ResultLine]:
     """Every non-blank line of an open binary file, one at a time (see the module docstring)."""
     number = 0
     while True:
@@ -232,7 +232,8 @@ def episode_lines(path: str | Path, *, limit: int | None = None) -> EpisodeLines
         problem = line.problem
         if problem is None and isinstance(line.row, dict) and is_error_row(line.row):
             key = line.row.get("key") if _text(line.row.get("key")) else "?"
-            problem = f"episode {key} failed to run: {_shorter(first_line(str(line.row['error'])))}"
+            reason = _shorter(first_line(str(line.row["error"])))
+            problem = f"episode {key} failed to run: {reason}"
         elif problem is None:
             problem = row_problem(line.row)
         if problem is not None:
@@ -329,6 +330,7 @@ class ResultWriter:
 
     def _prepare(self) -> None:
         """Lock, check and repair a regular file before anything is read or appended."""
+        assert self._fd is not None and self.path is not None  # __init__ opened the file
         try:
             self._regular = stat.S_ISREG(os.fstat(self._fd).st_mode)
             if self._regular:
@@ -400,6 +402,7 @@ class ResultWriter:
                 os.close(fd)
 
     def _truncate(self, size: int) -> None:
+        assert self._fd is not None  # write cuts back only a file it holds
         try:
             os.ftruncate(self._fd, size)
         except OSError as exc:
@@ -407,6 +410,7 @@ class ResultWriter:
                              f"left ({_reason(exc)}); the next run sets it aside") from None
 
     def _lines(self) -> Iterator[ResultLine]:
+        assert self._fd is not None  # previous reads back only a file it holds
         try:
             with os.fdopen(os.dup(self._fd), "rb") as fh:  # the dup shares the lock; closing it keeps it
                 fh.seek(0)

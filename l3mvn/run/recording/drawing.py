@@ -71,7 +71,9 @@ class FrameGeometry:
     @classmethod
     def of(cls, ep: RecordedEpisode, options: VideoOptions) -> FrameGeometry:
         """The geometry of every frame of ``ep`` (its camera's aspect, its map crop, a fusion row or not)."""
-        h0, w0 = cv2.imdecode(np.frombuffer(ep.steps[0].rgb_png, np.uint8), cv2.IMREAD_UNCHANGED).shape[:2]
+        first = cv2.imdecode(np.frombuffer(ep.steps[0].rgb_png, np.uint8), cv2.IMREAD_UNCHANGED)
+        assert first is not None  # the PNG read_episode encoded
+        h0, w0 = first.shape[:2]
         panel = options.height
         camera_w = round(panel * w0 / h0)
         line = max(56, panel // 6)
@@ -105,6 +107,7 @@ def frames(ep: RecordedEpisode, options: VideoOptions, *, title_frames: int | No
 
 def _camera(s: RecordedStep, geo: FrameGeometry) -> np.ndarray:
     bgr = cv2.imdecode(np.frombuffer(s.rgb_png, np.uint8), cv2.IMREAD_COLOR)
+    assert bgr is not None  # the PNG read_episode encoded
     h0 = bgr.shape[0]
     img = np.ascontiguousarray(cv2.resize(bgr, (geo.camera_w, geo.panel), interpolation=cv2.INTER_AREA)[..., ::-1])
     if s.camera_boxes is not None:

@@ -88,8 +88,9 @@ class RecordedEpisode:
 
     def result_number(self, name: str) -> float | None:
         """The result field ``name`` as a number; None when it is absent or not one."""
+        value = self.result.get(name)
         try:
-            return float(self.result.get(name))
+            return None if value is None else float(value)
         except (TypeError, ValueError):
             return None
 
@@ -171,7 +172,8 @@ class _LatestAt:
     """An entity's value at each step: its last row logged at or before it (None once cleared)."""
 
     def __init__(self, rows: list[tuple[int, int, dict | None]]) -> None:
-        self.rows, self.i, self.value = rows, 0, None
+        self.rows, self.i = rows, 0
+        self.value: dict | None = None
 
     def at(self, step: int) -> dict | None:
         while self.i < len(self.rows) and self.rows[self.i][0] <= step:
@@ -223,9 +225,9 @@ def _assemble(path: Path, events: dict) -> RecordedEpisode:
         if ids is not None:
             r, c, win = ids
             boxes.append((r, r + win.shape[0], c, c + win.shape[1]))
-        for marks in (ep.steps[-1].frontiers, ep.steps[-1].goal_mark):
-            if marks is not None and len(marks.xy):
-                x, y = marks.xy[:, 0], marks.xy[:, 1]
+        for drawn in (ep.steps[-1].frontiers, ep.steps[-1].goal_mark):
+            if drawn is not None and len(drawn.xy):
+                x, y = drawn.xy[:, 0], drawn.xy[:, 1]
                 boxes.append((int(y.min()), int(y.max()) + 1, int(x.min()), int(x.max()) + 1))
     ep.box = _crop(boxes, _map_size(events[MAP_SEMANTIC]))
     return ep
@@ -273,6 +275,7 @@ def _pixels(row: dict, buffer_column: str, format_column: str) -> tuple[np.ndarr
 
 def _png(row: dict | None) -> bytes:
     """The RGB frame, PNG-compressed: a 500-step episode of raw 640 x 480 frames would hold 460 MB."""
+    assert row is not None  # read only at the steps that logged a frame
     buf, h, w, per_pixel = _pixels(row, IMAGE_BUFFER, IMAGE_FORMAT)
     rgb = buf.reshape(h, w, per_pixel)[..., :3]
     return cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))[1].tobytes()

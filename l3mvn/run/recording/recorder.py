@@ -9,12 +9,14 @@ import math
 import os
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
 from scipy import ndimage as ndi
 
+from l3mvn.agent.decision import Decision
 from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.run.events import EventBus, StepEvent
 from l3mvn.run.recording.catalogue import APPLICATION_ID, TIMELINE, recording_gap, recording_path
@@ -74,7 +76,7 @@ class Recorder:
         self._rec.send_recording_name(f"{Path(str(dataset)).name} {scene} #{episode_id} {policy}")
         self._lock = threading.Lock()
         self._closed = False
-        self._unsubscribe = None
+        self._unsubscribe: Callable[[], None] | None = None
         self._errors = 0
         self._failure: str | None = None
         self._episode_key: str | None = None
@@ -210,7 +212,7 @@ class Recorder:
         if decision is not None:
             if decision.map is not None:
                 self._log_map(decision, ev.goal)
-            self._log_decision(ev)
+            self._log_decision(decision)
         if ev.done:
             self._log_result(ev)
             if self._map_box is not None:
@@ -457,8 +459,7 @@ class Recorder:
                     self._rec.log(LOG_LANGUAGE, rr.TextLog(f"F{f.id} [{name}] {query}{tail}"))
         self._last_queries = queries
 
-    def _log_decision(self, ev: StepEvent) -> None:
-        d = ev.decision
+    def _log_decision(self, d: Decision) -> None:
         parts = [d.action.name.lower()]
         if d.goal_kind:
             parts.append(f"[{d.goal_kind}]")

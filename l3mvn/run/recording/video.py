@@ -59,7 +59,7 @@ def export_video(recording: str | Path, out: str | Path, options: VideoOptions =
                              "full?); nothing was written there")
 
     with replacing_path(out, "video", check=whole) as partial:
-        writer = cv2.VideoWriter(str(partial), cv2.VideoWriter_fourcc(*"mp4v"), options.fps, (geo.width, geo.height))
+        writer = cv2.VideoWriter(str(partial), cv2.VideoWriter.fourcc(*"mp4v"), options.fps, (geo.width, geo.height))
         if not writer.isOpened():
             raise L3MVNError(f"cannot write video {out}: OpenCV could not open it for writing")
         try:

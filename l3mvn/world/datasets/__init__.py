@@ -5,6 +5,7 @@ procedural houses. The format is detected from the files and named in every summ
 from __future__ import annotations
 
 import numbers
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,7 +28,7 @@ class EpisodeSet:
 
     name: str
     split: str
-    scenes: dict[str, dict[int, SceneMap]]
+    scenes: Mapping[str, Mapping[int, SceneMap]]
     episodes: list[Episode]
     format: str = SEMEXP
 

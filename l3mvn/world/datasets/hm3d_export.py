@@ -271,8 +271,8 @@ def _instance_goals(scene: SceneMap, walkable: np.ndarray, labels: np.ndarray, n
         rows, cols = np.nonzero(mask)
         cx, cy = scene.cell_center(rows.mean(), cols.mean())
         centre = _habitat(scene, np.array(cx), np.array(cy), level + 0.5)
-        out.append(_Goal(first + i, category, storey, tuple(float(v) for v in centre),
-                         _habitat(scene, xs, ys, level), cells))
+        px, py, pz = (float(v) for v in centre)
+        out.append(_Goal(first + i, category, storey, (px, py, pz), _habitat(scene, xs, ys, level), cells))
     return out
 
 

@@ -23,7 +23,7 @@ from l3mvn.world.datasets.objectnav_files import EpisodeRecord, read_scenes, rea
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.paths import relative_parts
 from l3mvn.world.scenes.scan import ScanFiles, ScanFloor, floor_at, load_scan, scene_up_axis
-from l3mvn.world.task.regions import goal_region
+from l3mvn.world.task.regions import GoalRegion, goal_region
 from l3mvn.core.types import Pose
 from l3mvn.world.episode import Episode
 
@@ -169,7 +169,7 @@ def _on_navigable(where: str, floor: ScanFloor, pose: Pose) -> Pose:
 def geodesic_agreement(eset: EpisodeSet, cfg: Config) -> list[tuple[str, float, float]]:
     """(episode key, the file's geodesic distance, ours) for every episode with a file distance, under
     ``cfg``'s rule (habitat's view-point rule measures what the file measured)."""
-    regions: dict[tuple[str, str], object] = {}
+    regions: dict[tuple[str, str], GoalRegion] = {}
     out = []
     for ep in eset.episodes:
         if math.isfinite(ep.geodesic_distance_m):

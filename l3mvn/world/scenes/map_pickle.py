@@ -14,13 +14,15 @@ from __future__ import annotations
 
 import math
 import pickle
-from typing import Any, BinaryIO
+from typing import Any, Literal, Protocol, cast
 
 import numpy as np
 
 NUMERIC_KINDS = "biuf"  # bool, signed and unsigned integers, floats: what a map's arrays hold
 MAX_ELEMENTS = 1 << 31  # far beyond a house (2,000 x 2,000 cells x 16 channels is 2**26)
 _BYTE_ORDERS = {"<": "<", ">": ">", "|": "|", "=": "="}
+_ByteOrder = Literal["<", ">", "|", "="]
+_Order = Literal["C", "F"]
 _NUMPY_MODULES = ("numpy.core.multiarray", "numpy._core.multiarray")
 
 
@@ -28,9 +30,19 @@ class UnsafeMap(pickle.UnpicklingError):
     """The file names or builds something a SemExp map does not hold."""
 
 
+class MapFile(Protocol):
+    """What pickle reads a map from: an open binary file, plain or compressed."""
+
+    def read(self, n: int, /) -> bytes: ...
+
+    def readline(self) -> bytes: ...
+
+
 class _Dtype:
     """``numpy.dtype(code, align, copy)`` and its state as the file gives them; ``build`` makes the
     dtype from the type code and byte order alone."""
+
+    order: _ByteOrder
 
     def __init__(self, code: object = None, *flags: object) -> None:
         if not isinstance(code, str) or len(code) > 8 or any(not isinstance(f, (bool, int)) for f in flags):
@@ -67,7 +79,7 @@ class _Array:
         self.array = _array(data, dtype.build(), shape, "F" if fortran else "C")
 
 
-def _array(data: object, dtype: np.dtype, shape: object, order: str) -> np.ndarray:
+def _array(data: object, dtype: np.dtype, shape: object, order: _Order) -> np.ndarray:
     """A fresh array of ``shape`` from exactly the bytes it needs."""
     if not isinstance(shape, tuple) or not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0
                                                for n in shape) or len(shape) > 8:
@@ -97,7 +109,8 @@ def _frombuffer(data: object, dtype: object, shape: object, order: object) -> np
 def _scalar(dtype: object, data: object = None) -> np.generic:
     if not isinstance(dtype, _Dtype):
         raise UnsafeMap("a scalar of no numeric dtype")
-    return _array(data, dtype.build(), (), "C")[()]
+    # numpy's stubs type ``a[()]`` as an array; on a 0-d array it is the scalar.
+    return cast(np.generic, _array(data, dtype.build(), (), "C")[()])
 
 
 def _latin1(text: object, encoding: object = "latin1") -> bytes:
@@ -127,7 +140,7 @@ class _MapUnpickler(pickle.Unpickler):
                             "arrays") from None
 
 
-def load_map_pickle(fh: BinaryIO) -> Any:
+def load_map_pickle(fh: MapFile) -> Any:
     """The value pickled in ``fh``, every array built by this module (UnsafeMap, or pickle's own
     errors for a damaged file, otherwise)."""
     return _materialised(_MapUnpickler(fh).load())

@@ -22,8 +22,10 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import numba as nb
 import numpy as np
@@ -44,6 +46,7 @@ ISLAND_MIN_M2 = 1.0  # navigable pieces smaller than this are inside furniture o
 BELOW_FLOOR_M = 1.0  # a floor's world keeps geometry this far below it (stairs down), and all up to the next
 GRID_MARGIN_M = 0.5
 _UNKNOWN_RGB = (0.6, 0.6, 0.6)  # a material whose texture cannot be decoded (Basis Universal)
+_Floor = TypeVar("_Floor", bound=SceneMap)
 
 
 @dataclass(frozen=True, eq=False)
@@ -426,7 +429,7 @@ def _floor_heights(grid: _Grid, hits: _Hits, level: float, max_climb: float) -> 
     order = np.lexsort((np.abs(heights - level), cells))
     cells, heights = cells[order], heights[order]
     first = np.r_[True, cells[1:] != cells[:-1]]
-    height = np.full(grid.rows * grid.cols, np.nan)
+    height: np.ndarray = np.full(grid.rows * grid.cols, np.nan)
     height[cells[first]] = heights[first]
     height = height.reshape(grid.rows, grid.cols)
     index = np.arange(height.size).reshape(height.shape)
@@ -471,9 +474,9 @@ def load_scan(name: str, files: ScanFiles, cfg: SimConfig, *, goal_instances: di
     below them."""
     stage = _read_glb(files.stage, files.up)
     if files.semantic_glb is not None and files.semantic_txt is not None:
-        objects = read_semantic_txt(files.semantic_txt)
-        instances = triangle_instances(stage, _read_glb(files.semantic_glb, files.up, ids=True), objects)
-        categories = instance_categories(objects, goal_instances)
+        annotated = read_semantic_txt(files.semantic_txt)
+        instances = triangle_instances(stage, _read_glb(files.semantic_glb, files.up, ids=True), annotated)
+        categories = instance_categories(annotated, goal_instances)
     else:
         instances, categories = np.zeros(len(stage.faces), np.int64), {}
     index = {c: k + 1 for k, c in enumerate(SCAN_CATEGORIES)}
@@ -546,7 +549,7 @@ def _floor_view_points(view_points, grid: _Grid, level: float, top: float) -> di
     return {c: np.asarray(p, np.float64) for c, p in out.items()}
 
 
-def floor_at(floors: dict[int, SceneMap], height: float) -> SceneMap:
+def floor_at(floors: Mapping[int, _Floor], height: float) -> _Floor:
     """The floor an agent standing at habitat height ``height`` is on: the highest at or below it
     (within half a storey, for starts a little under the floor surface)."""
     below = [f for f in floors.values() if f.floor_height_m <= height + STOREY_MIN_M / 2]

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import cast, overload
 
 import numpy as np
 from scipy import ndimage as ndi
@@ -72,11 +73,12 @@ class SceneMap:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.navigable.shape  # type: ignore[return-value]
+        return self.navigable.shape
 
     @cached_property
     def object_any(self) -> np.ndarray:
-        return self.objects.any(axis=0)
+        # numpy's stubs allow a scalar for any reduction along an axis; of a 3-D grid it is a 2-D array.
+        return cast(np.ndarray, self.objects.any(axis=0))
 
     @cached_property
     def free(self) -> np.ndarray:
@@ -108,8 +110,15 @@ class SceneMap:
     def cell_of(self, x: float, y: float) -> tuple[int, int]:
         return int(math.floor(y / self.resolution_m)), int(math.floor(x / self.resolution_m))
 
-    def cell_center(self, row: int, col: int) -> tuple[float, float]:
-        """World (x, y) of a cell's centre."""
+    @overload
+    def cell_center(self, row: float, col: float) -> tuple[float, float]: ...
+
+    @overload
+    def cell_center(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def cell_center(self, row: float | np.ndarray,
+                    col: float | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
+        """World (x, y) of a cell's centre (element-wise for arrays of rows and columns)."""
         return (col + 0.5) * self.resolution_m, (row + 0.5) * self.resolution_m
 
     def in_bounds(self, row: int, col: int) -> bool:

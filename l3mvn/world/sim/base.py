@@ -70,6 +70,9 @@ class EpisodeState:
     so the contract's properties mean the same on each. A backend sets the underscored fields in
     ``reset`` and ``step``; it has ``cfg``, ``categories`` and ``scene``."""
 
+    scene: SceneMap
+    cfg: SimConfig
+    categories: tuple[str, ...]
     _episode: Episode | None = None
     _pose: Pose | None = None
     _steps = 0

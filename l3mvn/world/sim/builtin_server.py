@@ -74,7 +74,8 @@ class BuiltinBackend:
     def op_reset(self, request: dict) -> tuple[dict, dict]:
         sim = self._sim()
         scene = sim.scene
-        pose = scene.pose_from_habitat(request.get("position"), request.get("rotation"))
+        # A request without them fails inside (a TypeError), answered like any failed request.
+        pose = scene.pose_from_habitat(request.get("position"), request.get("rotation"))  # type: ignore[arg-type]
         goal = request.get("goal", scene.categories[0])
         episode = Episode(episode_id=0, scene=scene.name, floor=scene.floor, start=pose, goal=goal)
         return self._reply(sim.reset(episode), 0.0)
@@ -113,7 +114,7 @@ class BuiltinBackend:
     @staticmethod
     def _snap(scene: SceneMap, point: object) -> tuple[int, int]:
         try:
-            p0, _, p2 = (float(v) for v in point)  # type: ignore[union-attr]
+            p0, _, p2 = (float(v) for v in point)  # type: ignore[attr-defined]  # any JSON value: TypeError below
         except (TypeError, ValueError):
             raise RequestError(f"a point must be three numbers [p0, p1, p2], got {point!r}") from None
         if not (math.isfinite(p0) and math.isfinite(p2)):

@@ -25,6 +25,7 @@ import weakref
 from collections.abc import Mapping, Sequence
 from functools import cached_property
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
@@ -161,7 +162,7 @@ class ServerProcess:
         last = _last_line(self._stderr)
         return f"{self.name} {how} during {op}" + (f": {last}" if last else "")
 
-    def _fail(self, message: str) -> None:
+    def _fail(self, message: str) -> NoReturn:
         self._failure = one_line(L3MVNError(message))
         self._finalizer()
         raise L3MVNError(self._failure)

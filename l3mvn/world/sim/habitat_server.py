@@ -324,6 +324,7 @@ class HabitatBackend:
 
     def _category_lut(self, categories, table):
         """semantic id -> 1 + index of our category (0: background or not in the table)."""
+        assert self.sim is not None  # called by op_load once the simulator is up
         scene = self.sim.semantic_scene
         objects = [o for o in (scene.objects if scene is not None else []) if o is not None]
         ids = [int(o.semantic_id) for o in objects]
@@ -357,6 +358,7 @@ class HabitatBackend:
 
     def op_reset(self, request):
         agent = self._agent()
+        assert self.sim is not None  # _agent() refuses a request before load
         target = _point(request.get("position"), "position")
         snapped = np.asarray(self.sim.pathfinder.snap_point(target), dtype=np.float64)
         # The navmesh is eroded by the agent radius: a start within one radius of it is that spot.
@@ -374,6 +376,7 @@ class HabitatBackend:
 
     def op_step(self, request):
         agent = self._agent()
+        assert self.sim is not None  # _agent() refuses a request before load
         action = request.get("action")
         if action not in ACTIONS:
             raise RequestError(f"unknown action {action!r}; valid: {', '.join(ACTIONS)}")
@@ -399,6 +402,7 @@ class HabitatBackend:
     def op_geodesic(self, request):
         """Shortest navmesh distance from ``start`` to the nearest of ``goals`` (null: no path)."""
         self._agent()
+        assert self.sim is not None  # _agent() refuses a request before load
         goals = request.get("goals")
         if not isinstance(goals, list) or not goals:
             raise RequestError("geodesic needs a non-empty 'goals' list of [p0, p1, p2] points")

@@ -24,7 +24,7 @@ from l3mvn.world.task.views import ViewRecord
 def target_visible(obs: Observation, seen_fraction: float) -> bool:
     """Whether at least ``seen_fraction`` of the frame shows the goal with valid depth."""
     visible = np.count_nonzero((obs.semantic == obs.goal_id) & (obs.depth > 0))
-    return visible >= seen_fraction * obs.semantic.size
+    return bool(visible >= seen_fraction * obs.semantic.size)
 
 
 class EpisodeMeasures:

@@ -67,4 +67,5 @@ class ObjectNavTask:
         r, c = self.scene.cell_of(start.x, start.y)
         if not self.scene.in_bounds(r, c) or self._walk_labels[r, c] == 0:
             return np.empty(0, np.int64), np.empty(0, np.int64)
-        return np.nonzero(self._walk_labels == self._walk_labels[r, c])
+        rows, cols = np.nonzero(self._walk_labels == self._walk_labels[r, c])
+        return rows, cols
