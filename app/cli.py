@@ -25,7 +25,7 @@ def _typed(kind: type, flag: str):
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from l3mvn_studio.origin import ALLOW_ORIGIN_FLAG
-    from l3mvn.run.registry import POLICY_NAMES
+    from l3mvn.run.registry import policy_names
 
     parser.add_argument("--dataset", default=None, help="SemExp-format dataset directory (default: procedural houses)")
     parser.add_argument("--scenes", default=None, metavar="DIR",
@@ -34,8 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--houses", type=_typed(int, "--houses"), default=3, help="procedural houses when no --dataset (default 3)")
     parser.add_argument("--episodes-per-house", type=_typed(int, "--episodes-per-house"), default=5, help="procedural episodes per house (default 5)")
     parser.add_argument("--seed", type=_typed(int, "--seed"), default=0, help="seed for procedural houses, episodes and policies")
-    parser.add_argument("--policy", choices=POLICY_NAMES, default="oracle" if "l3mvn-zs" not in POLICY_NAMES
-                        else "l3mvn-zs", help="policy selected when the page opens (changeable in the page)")
+    parser.add_argument("--policy", choices=policy_names(), default="l3mvn-zs", help="policy selected when the page opens (changeable in the page)")
     parser.add_argument("--host", default="127.0.0.1",
                         help="interface to bind (default 127.0.0.1; anything else exposes the controls)")
     parser.add_argument(ALLOW_ORIGIN_FLAG, action="append", default=[], metavar="ORIGIN", dest="allow_origin",

@@ -28,7 +28,7 @@ from l3mvn.run.eval.job import EvalJob
 from l3mvn.run.recording.catalogue import recording_path, unique_tag
 from l3mvn.run.recording.drawing import FONT, PANEL_BG, TEXT_RGB, VideoOptions, fit_text, frames
 from l3mvn.run.recording.recorded import RecordedEpisode, read_episode
-from l3mvn.run.registry import ALIASES, DIRECT_POLICIES, POLICY_NAMES, TELEOP
+from l3mvn.run.registry import PolicySpec, policies
 
 PICTURE_HEIGHT = 400  # pixels of a side's map panel: the map is what is compared, so it leads
 CAMERA_SCALE = 0.6  # the camera frame under it, at this share of the map panel's height
@@ -39,11 +39,6 @@ _DIM = (175, 175, 175)
 _DIFF_RGB = (255, 200, 40)
 _ENDED_RGB = (120, 120, 120)
 _RUNNING = threading.Lock()
-# Policies a comparison cannot run, and why (shown beside the dropdowns).
-EXCLUDED = {
-    TELEOP: "it is driven by hand and cannot run by itself",
-    **{p: "it keeps no map, so there is no map or frontier to compare" for p in DIRECT_POLICIES},
-}
 # The recorder's decision line: "<action> [<goal kind>] F<chosen frontier> <reason> ...".
 _DECISION = re.compile(r"^(?P<action>[a-z_]+)(?: \[(?P<kind>[a-z]+)\])?(?: F(?P<frontier>\d+)(?=\s|$))?")
 
@@ -195,16 +190,29 @@ def parse_decision(step: int, line: str, goal_xy: np.ndarray | None) -> StepDeci
 
 def comparable_policies() -> tuple[str, ...]:
     """Policy names a comparison can run (aliases left out: they would run the same policy twice)."""
-    return tuple(p for p in POLICY_NAMES if p not in EXCLUDED and p not in ALIASES)
+    return tuple(name for name, spec in policies().items() if _excluded(spec) is None and spec.same_as is None)
+
+
+def excluded_policies() -> dict[str, str]:
+    """The policies a comparison cannot run, each with why."""
+    return {name: why for name, spec in policies().items() if (why := _excluded(spec)) is not None}
 
 
 def check_contender(policy: str) -> str:
-    if policy not in POLICY_NAMES:
+    spec = policies().get(policy)
+    if spec is None:
         raise L3MVNError(f"unknown policy {policy!r}; choose one of {', '.join(comparable_policies())}")
-    if policy in EXCLUDED:
-        raise L3MVNError(f"policy {policy!r} cannot be compared: {EXCLUDED[policy]}; choose one of "
+    if (why := _excluded(spec)) is not None:
+        raise L3MVNError(f"policy {policy!r} cannot be compared: {why}; choose one of "
                          f"{', '.join(comparable_policies())}")
     return policy
+
+
+def _excluded(spec: PolicySpec) -> str | None:
+    """Why a policy cannot take part in a comparison, or None."""
+    if spec.driven:
+        return "it is driven by hand and cannot run by itself"
+    return None if spec.map_based else "it keeps no map, so there is no map or frontier to compare"
 
 
 def episode_job(source: EpisodeSource, contender: Contender, key: str, record_dir: str | Path | None) -> EvalJob:

@@ -21,11 +21,11 @@ import numpy as np
 import viser
 
 from l3mvn_studio.compare import (
-    EXCLUDED,
     Comparison,
     Contender,
     EpisodeSource,
     comparable_policies,
+    excluded_policies,
     compare_recordings,
     run_comparison,
     side_folder,
@@ -74,7 +74,7 @@ class ComparePanel:
         self.comparison: Comparison | None = None
         choices = comparable_policies()
         first = current_policy if current_policy in choices else FALLBACK_A
-        excluded = "; ".join(f"`{p}` ({why})" for p, why in EXCLUDED.items())
+        excluded = "; ".join(f"`{p}` ({why})" for p, why in excluded_policies().items())
         with gui.add_folder("Compare", expand_by_default=False):
             gui.add_markdown("Two policies on the episode selected in **Episode**, step by step, "
                              f"run as `l3mvn eval` runs them (same seed). Not offered: {excluded}.")

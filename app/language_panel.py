@@ -12,7 +12,7 @@ from __future__ import annotations
 from l3mvn_studio.page_text import html
 from l3mvn_studio.state import FrontierMarker, MapView
 from l3mvn.agent.frontiers import Fusion
-from l3mvn.run.registry import ALIASES, LANGUAGE_POLICIES
+from l3mvn.run.registry import language_policies, reads_language
 from l3mvn.run.viz import category_color
 
 SHOWN_FRONTIERS = 4  # the chosen frontier and the best others by fused score
@@ -21,14 +21,14 @@ _MUTED = "#666"
 
 
 def uses_language(policy: str) -> bool:
-    return ALIASES.get(policy, policy) in LANGUAGE_POLICIES
+    return reads_language(policy)
 
 
 def language_html(view: MapView | None, policy: str, *, shown: int = SHOWN_FRONTIERS) -> str:
     """The whole folder for one snapshot: a note when there is nothing to show, else the rule line and
     one card per shown frontier (chosen first)."""
     if not uses_language(policy):
-        names = ", ".join(LANGUAGE_POLICIES)
+        names = ", ".join(language_policies())
         return _note(f"Policy <b>{html(policy)}</b> uses no language: it chooses its goals without a language "
                      f"model. Pick a language policy ({html(names)}) and press Reset to see its scores here.")
     if view is None or view.fusion is None or not view.frontiers:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from l3mvn.run.registry import DIRECT_POLICIES
+from l3mvn.run.registry import keeps_map
 from l3mvn.run.viz import COLLISION_RGB
 from l3mvn_studio.frontier_ranking import TOP_LABELS, frontier_score
 from l3mvn_studio.map_image import (
@@ -79,7 +79,7 @@ def metrics_markdown(metrics: Metrics) -> str:
 
 def no_map_markdown(policy: str, *, started: bool) -> str:
     """The Frontiers panel without a map: why, for the policy that is chosen."""
-    if policy in DIRECT_POLICIES:
+    if not keeps_map(policy):
         return f"_no frontiers: policy {md(repr(policy))} keeps no map (the map view shows the ground-truth plan)_"
     return ("_frontiers appear after the agent's first steps_" if started
             else f"_policy {md(repr(policy))} builds a map: frontiers appear after Reset and the first steps_")

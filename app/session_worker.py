@@ -32,7 +32,7 @@ from l3mvn.run.events import EventBus, StepEvent
 from l3mvn.run.recording.catalogue import DEFAULT_RECORD_DIR, unique_tag
 from l3mvn.agent.modular.teleop import TeleopAgent
 from l3mvn.run.registry import (
-    ALIASES, DIRECT_POLICIES, LANGUAGE_POLICIES, POLICY_NAMES, TELEOP, check_policy,
+    TELEOP, check_policy, keeps_map, language_policies, names_where, reads_language, scorer_of,
 )
 from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.run.runner import Runner
@@ -239,9 +239,9 @@ class DashboardController:
             return
         self.scorer = name
         session = self._session
-        if session is None or session.policy_name not in LANGUAGE_POLICIES:
+        if session is None or not reads_language(session.policy_name):
             self._notify(f"scorer {name!r} takes effect when a language policy runs "
-                         f"({', '.join(LANGUAGE_POLICIES)})", client_id=client_id)
+                         f"({', '.join(language_policies())})", client_id=client_id)
             return
         self._submit("scorer", self._apply_scorer, client_id, busy=f"loading the language scorer {name!r}")
 
@@ -272,7 +272,7 @@ class DashboardController:
         if not isinstance(session.policy, Steerable):
             raise L3MVNError(
                 f"policy {session.policy_name!r} does not take manual goals; map-based policies do "
-                f"(valid: {', '.join(p for p in POLICY_NAMES if p not in DIRECT_POLICIES)})"
+                f"(valid: {', '.join(names_where(lambda spec: spec.map_based))})"
             )
         if cell is not None:
             view = self._snapshot.map
@@ -386,7 +386,7 @@ class DashboardController:
         if not self._runner_fits(cfg, self.policy_name):
             self._runner.close()
             self._runner, self._swapped_live = Runner(cfg, seed=self.seed), False
-        if self.policy_name in LANGUAGE_POLICIES and self.policy_name not in self._runner.floor(scene).policies:
+        if reads_language(self.policy_name) and self.policy_name not in self._runner.floor(scene).policies:
             self._set_busy(f"loading the language model of {self.policy_name} (a few seconds, once)")
         # The same hash ``l3mvn eval`` writes for these settings, so dashboard runs can be matched.
         chash = config_hash(cfg, self.policy_name, self.seed)
@@ -399,14 +399,12 @@ class DashboardController:
 
     def _scorer_of(self, policy: str) -> str | None:
         """The scorer a session of ``policy`` built now scores with (None: not a language policy)."""
-        resolved = ALIASES.get(policy, policy)
-        if resolved not in LANGUAGE_POLICIES:
-            return None
-        return self.scorer or self.cfg.policy.scorer or LANGUAGE_POLICIES[resolved][0]
+        return scorer_of(policy, replace(self.cfg.policy, scorer=self.scorer or self.cfg.policy.scorer))
 
     @staticmethod
     def headed_policies() -> tuple[str, ...]:
-        return tuple(name for name, (scorer, *_) in LANGUAGE_POLICIES.items() if scorer == HEAD_SCORER)
+        return names_where(lambda spec: spec.language is not None and spec.same_as is None
+                           and spec.language.scorer == HEAD_SCORER)
 
     def _session_config(self, policy: str) -> Config:
         """The config a session of ``policy`` is built and hashed with: the Scorer choice for a language
@@ -501,7 +499,7 @@ class DashboardController:
         decision = event.decision
         if decision is not None and decision.map is not None:
             view = agent_map_view(decision, target=event.goal)
-        elif session.policy_name in DIRECT_POLICIES:
+        elif not keeps_map(session.policy_name):
             view = ground_truth_view(session.task.scene, self._trajectory, decision, target=event.goal)
         else:
             view = None  # a map-based agent before its first step

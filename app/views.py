@@ -27,7 +27,7 @@ import viser
 
 from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.errors import L3MVNError
-from l3mvn.run.registry import POLICY_NAMES, TELEOP
+from l3mvn.run.registry import TELEOP, policy_names
 from l3mvn.run.viz import legend
 from l3mvn_studio.client_input import CLICKABLE, UpdateGate, ray_refusal
 from l3mvn_studio.compare_view import ComparePanel, EpisodeSource
@@ -110,7 +110,7 @@ class DashboardView:
             self.episode = gui.add_dropdown("Episode", self._episode_labels(ctl.scene_keys[0]))
             self.target = gui.add_dropdown("Target", GOAL_CATEGORIES, initial_value=first.goal,
                                            hint="the episode's goal; changing it mid-episode starts a new segment")
-            self.policy = gui.add_dropdown("Policy", POLICY_NAMES, initial_value=ctl.policy_name,
+            self.policy = gui.add_dropdown("Policy", policy_names(), initial_value=ctl.policy_name,
                                            hint="takes effect on the next Reset")
             self.scorer = gui.add_dropdown("Scorer", (DEFAULT_SCORER,) + ctl.scorer_names(),
                                            hint="language policies only; 'policy default' restores theirs on Reset")

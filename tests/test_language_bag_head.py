@@ -163,3 +163,14 @@ def test_flags_of_the_other_heads_are_refused_for_a_bag_head(tmp_path):
         train_any_head("rooms-bag", data=[str(tmp_path / "f.jsonl")])
     with pytest.raises(L3MVNError, match="--gibson-rooms is room data"):
         train_any_head("frontiers-bag", gibson_rooms=tmp_path / "r.jsonl")
+
+
+def test_training_that_diverges_is_refused_in_one_line_not_saved(tmp_path, monkeypatch):
+    import l3mvn.agent.language.frontier_head as frontier_head
+
+    data = _frontier_file(tmp_path)
+    # A run whose validation regret is never finite (NaN weights) must not load "the best epoch" of none.
+    monkeypatch.setattr(frontier_head, "_scores", lambda *args: {"regret_m": float("nan")})
+    with pytest.raises(L3MVNError, match="training diverged: no epoch of 3 gave a finite validation regret"):
+        train_frontier_head([data], out=tmp_path / "nan.pt", epochs=3, seed=3, bag=True)
+    assert not (tmp_path / "nan.pt").exists()

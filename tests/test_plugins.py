@@ -120,3 +120,32 @@ def test_a_scorer_from_an_installed_package_scores_for_a_language_policy(plugin_
     assert row["config"]["policy"]["scorer"] == "sink-means-toilet"
     check = _l3mvn(plugin_path, "eval", "--policy", "l3mvn-zs", "--scorer", "no-such-scorer", "--houses", "1")
     assert check.returncode == 2 and "sink-means-toilet" in check.stderr and "no-such-scorer" in check.stderr
+
+
+@pytest.fixture
+def plugin_installed(plugin_path, monkeypatch):
+    """The package on this process's path, with the registry read afresh (and again afterwards)."""
+    import importlib
+
+    from l3mvn.run import registry
+
+    monkeypatch.syspath_prepend(str(plugin_path))
+    importlib.invalidate_caches()
+    registry._registry.cache_clear()
+    yield
+    monkeypatch.undo()
+    importlib.invalidate_caches()
+    registry._registry.cache_clear()
+
+
+def test_a_policy_from_an_installed_package_is_offered_in_the_dashboard_and_runs_there(plugin_installed):
+    from conftest import serve_dashboard
+
+    for dash in serve_dashboard(episodes_per_house=1, policy="bump-and-turn"):
+        assert "bump-and-turn" in dash.view.policy.options and dash.view.policy.value == "bump-and-turn"
+        scene = dash.controller.scene_keys[0]
+        dash.controller.reset(scene, dash.controller.episodes_of(scene)[0].episode_id)
+        assert dash.controller.wait_idle()
+        dash.controller.step()
+        assert dash.controller.wait_idle()
+        assert dash.controller.snapshot.error is None and dash.controller.snapshot.event.step == 1

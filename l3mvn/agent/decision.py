@@ -8,15 +8,19 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from l3mvn.core.types import Action
 
+if TYPE_CHECKING:
+    from l3mvn.agent.frontiers import Frontier
 
-class GoalKind(enum.StrEnum):
-    """What the agent's long-term goal is; a ``str`` so event consumers can compare with plain names."""
+
+class GoalKind(str, enum.Enum):
+    """What the agent's long-term goal is; a ``str`` so event consumers can compare with plain names,
+    printed as its value (``enum.StrEnum``'s behaviour, which Python 3.10 lacks)."""
 
     NONE = ""
     TARGET = "target"  # the target, confirmed on the map: walk to it and stop
@@ -31,6 +35,12 @@ class GoalKind(enum.StrEnum):
     ESCAPE = "escape"  # stuck: collision marks cleared, a random turn then forward
     LOOK_AROUND = "look-around"  # the initial turn in place
 
+    def __str__(self) -> str:
+        return str(self.value)
+
+    def __format__(self, spec: str) -> str:
+        return format(str(self.value), spec)
+
 
 # Goals that explore rather than approach what was seen.
 EXPLORING = frozenset({GoalKind.FRONTIER, GoalKind.RANDOM, GoalKind.EXPLORE, GoalKind.LOOK})
@@ -43,7 +53,7 @@ class Decision:
     action: Action
     reason: str = ""
     map: Any = None  # l3mvn.agent.mapping.SemanticMap (live view: copy to keep)
-    frontiers: list = field(default_factory=list)  # list[l3mvn.agent.frontiers.Frontier]
+    frontiers: list[Frontier] = field(default_factory=list)
     long_term_goal: tuple[int, int] | None = None
     goal_kind: GoalKind = GoalKind.NONE
     chosen_frontier: int | None = None

@@ -47,7 +47,8 @@ class SegmentationNoise:
         others = self._rng.integers(1, self.k + 1, size=len(ids))
         lut[ids[swap]] = others[swap]
         lut[ids[drop & ~swap]] = 0
-        return lut[semantic]
+        relabelled: np.ndarray = lut[semantic]  # numpy types fancy indexing as Any
+        return relabelled
 
 
 @dataclass(frozen=True, eq=False)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 
@@ -130,6 +131,14 @@ def _back_project(d: np.ndarray, mask: np.ndarray, intrinsics: CameraIntrinsics,
     points[:, 1] = pose.y + ahead * sh - rightward * ch
     points[:, 2] = intrinsics.camera_height_m + d * np.broadcast_to(rise_per_m[:, None], mask.shape)[mask]
     return points
+
+
+@overload
+def downsample_frame(depth: np.ndarray, semantic: np.ndarray, factor: int) -> tuple[np.ndarray, np.ndarray]: ...
+
+
+@overload
+def downsample_frame(depth: np.ndarray, semantic: None, factor: int) -> tuple[np.ndarray, None]: ...
 
 
 def downsample_frame(

@@ -14,7 +14,10 @@ def one_line(exc: BaseException) -> str:
     return str(exc).replace("\r", "\\r").replace("\n", "\\n")
 
 
-def first_line(exc: BaseException) -> str:
-    """The first line of a third-party exception's message (or its type), to quote inside ours."""
+def first_line(exc: BaseException | str) -> str:
+    """The first line of a third-party exception's message (or its type), or of a text read from a
+    file (an error row's), to quote inside ours."""
     text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
+    if text:
+        return text.splitlines()[0]
+    return type(exc).__name__ if isinstance(exc, BaseException) else "no message"

@@ -4,11 +4,13 @@ footprint, the planner's obstacle growth and the policies that judge where the a
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 
-def disk(radius_cells: int) -> np.ndarray:
+def disk(radius_cells: int) -> npt.NDArray[np.bool_]:
     """The (2r+1, 2r+1) bool disk of cells within ``radius_cells`` of the centre: one shape, so the
     planner and the policies agree on which gaps the agent fits through."""
     r = int(radius_cells)
     yy, xx = np.ogrid[-r : r + 1, -r : r + 1]
-    return (xx * xx + yy * yy) <= r * r
+    inside: npt.NDArray[np.bool_] = (xx * xx + yy * yy) <= r * r  # np.ogrid is typed Any
+    return inside

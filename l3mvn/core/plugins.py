@@ -38,7 +38,7 @@ def discover(group: str, accept: Callable[[str, Any], str | None], taken: frozen
     for point in sorted(entry_points(group=group), key=lambda p: p.name):
         where = f"{point.value} ({point.dist.name if point.dist else 'unknown package'})"
         if point.name in taken or point.name in found.objects:
-            problem = f"the name {point.name!r} is taken by a built-in or another plugin"
+            problem: str | None = f"the name {point.name!r} is taken by a built-in or another plugin"
         else:
             try:
                 obj = point.load()

@@ -10,8 +10,10 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import Any, overload
 
 import numpy as np
+import numpy.typing as npt
 
 from l3mvn.core.errors import L3MVNError
 
@@ -105,6 +107,14 @@ class EpisodeBrief:
         return f"{self.scene}/{self.floor}/{self.episode_id}"
 
 
-def wrap_angle(angle):
+@overload
+def wrap_angle(angle: float) -> float: ...
+
+
+@overload
+def wrap_angle(angle: npt.NDArray[np.floating[Any]]) -> npt.NDArray[np.floating[Any]]: ...
+
+
+def wrap_angle(angle: float | npt.NDArray[np.floating[Any]]) -> float | npt.NDArray[np.floating[Any]]:
     """``angle`` (radians; a float or a numpy array) wrapped into [-pi, pi)."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi

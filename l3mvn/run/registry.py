@@ -36,6 +36,7 @@ from l3mvn.world.sim.base import Environment, MotionModel
 from l3mvn.world.task import ObjectNavTask
 
 PLUGIN_GROUP = "l3mvn.policies"
+TELEOP = "teleop"  # the built-in policy a person drives from the dashboard
 
 
 @dataclass(frozen=True)
@@ -140,7 +141,7 @@ BUILT_IN: tuple[PolicySpec, ...] = (
                same_as="cost-utility"),
     PolicySpec("exp+llm", _language("l3mvn-ff", _FEED_FORWARD), "= l3mvn-ff (the paper's Table II name)",
                language=_FEED_FORWARD, same_as="l3mvn-ff"),
-    PolicySpec("teleop", _teleop, "the map-based agent driven by hand in the dashboard", driven=True),
+    PolicySpec(TELEOP, _teleop, "the map-based agent driven by hand in the dashboard", driven=True),
 )
 
 
@@ -186,6 +187,23 @@ def names_where(test: Callable[[PolicySpec], bool]) -> tuple[str, ...]:
     return tuple(name for name, spec in _registry()[0].items() if test(spec))
 
 
+def keeps_map(name: str) -> bool:
+    """Whether the policy ``name`` maps what it sees (an unknown name: False)."""
+    spec = _registry()[0].get(name)
+    return spec is not None and spec.map_based
+
+
+def reads_language(name: str) -> bool:
+    """Whether the policy ``name`` scores frontiers with a language scorer (an unknown name: False)."""
+    spec = _registry()[0].get(name)
+    return spec is not None and spec.language is not None
+
+
+def language_policies() -> tuple[str, ...]:
+    """The language policies by their own names (the paper's other names left out), for messages."""
+    return names_where(lambda spec: spec.language is not None and spec.same_as is None)
+
+
 def scorer_of(name: str, options: PolicyConfig) -> str | None:
     """The language scorer a policy ``name`` built with ``options`` scores with: ``--scorer`` when given,
     else the policy's own default; None for a policy that reads no language model."""
@@ -217,11 +235,3 @@ def make_policy(name: str, env: Environment, task: ObjectNavTask, config: Config
     return spec.build(PolicyContext(tuple(env.categories), config, seed,
                                     env=env if world else None, task=task if world else None))
 
-
-# TEMPORARY (removed once the dashboard reads the functions above)
-POLICY_NAMES = policy_names()
-TELEOP = "teleop"
-DIRECT_POLICIES = tuple(n for n, s in policies().items() if not s.map_based)
-LANGUAGE_POLICIES = {n: (s.language.scorer, s.language.exploration, s.language.paradigm)
-                     for n, s in policies().items() if s.language is not None and s.same_as is None}
-ALIASES = {n: s.same_as for n, s in policies().items() if s.same_as is not None}

@@ -30,8 +30,11 @@ explored area, not the map size.
 
 from __future__ import annotations
 
+from typing import cast
+
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.config import FrontierConfig
@@ -129,7 +132,8 @@ def extract_frontiers(
     ]
 
 
-def _validate(explored, obstacle, agent_cell, distance_m, category_maps, category_names, cfg) -> None:
+def _validate(explored: np.ndarray, obstacle: np.ndarray, agent_cell: tuple[int, int], distance_m: np.ndarray,
+              category_maps: np.ndarray, category_names: tuple[str, ...], cfg: FrontierConfig) -> None:
     if not isinstance(cfg, FrontierConfig):
         raise L3MVNError(f"cfg must be a FrontierConfig, got {type(cfg).__name__}")
     for name, arr in (("explored", explored), ("obstacle", obstacle)):
@@ -258,14 +262,15 @@ def _cluster_distances(
     return np.where(np.isfinite(out), out, fallback)
 
 
-def _near_distance(cells: np.ndarray, distance_m: np.ndarray) -> np.ndarray:
+def _near_distance(cells: np.ndarray, distance_m: np.ndarray) -> npt.NDArray[np.float64]:
     """Smallest finite distance in each cell's 3x3 neighbourhood (inf if none; NaN is unreachable)."""
     height, width = distance_m.shape
     rows = np.clip(cells[:, 0, None] + _NEIGHBOURS[None, :, 0], 0, height - 1)
     cols = np.clip(cells[:, 1, None] + _NEIGHBOURS[None, :, 1], 0, width - 1)
     values = distance_m[rows, cols].astype(np.float64)
     values[np.isnan(values)] = np.inf
-    return values.min(axis=1)
+    nearest: npt.NDArray[np.float64] = values.min(axis=1)  # numpy types the reduction as Any
+    return nearest
 
 
 def _distance_filter(distances: np.ndarray, cfg: FrontierConfig) -> np.ndarray:
@@ -275,14 +280,15 @@ def _distance_filter(distances: np.ndarray, cfg: FrontierConfig) -> np.ndarray:
     return np.flatnonzero(within if within.any() else usable)
 
 
-def _turn_costs(centers: np.ndarray, agent_cell: tuple[int, int], heading: float | None,
-                cfg: FrontierConfig) -> np.ndarray:
+def _turn_costs(centers: npt.NDArray[np.int64], agent_cell: tuple[int, int], heading: float | None,
+                cfg: FrontierConfig) -> npt.NDArray[np.float64]:
     """Metres charged for turning toward each centre (0 without a heading or a turn cost)."""
     if heading is None or cfg.turn_cost_m_per_rad == 0.0:
         return np.zeros(len(centers))
     bearing = np.arctan2(centers[:, 0] - agent_cell[0], centers[:, 1] - agent_cell[1])
     error = np.abs(wrap_angle(bearing - heading))
-    return cfg.turn_cost_m_per_rad * error
+    costs: npt.NDArray[np.float64] = cfg.turn_cost_m_per_rad * error  # numpy types the product as Any
+    return costs
 
 
 def _cost_utility(
@@ -295,12 +301,13 @@ def _cost_utility(
     return sizes, sizes - cfg.cu_lambda * distances
 
 
-def _normalise(score: np.ndarray) -> np.ndarray:
+def _normalise(score: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """Min-max to [0, 1]; all-equal scores (one frontier included) all get 1."""
     span = score.max() - score.min()
     if span <= 0:
         return np.ones_like(score)
-    return (score - score.min()) / span
+    normalised: npt.NDArray[np.float64] = (score - score.min()) / span  # numpy types the division as Any
+    return normalised
 
 
 def _window_objects(
@@ -316,7 +323,8 @@ def _window_objects(
     c0 = max(0, int(centers[:, 1].min()) - half)
     c1 = min(width, int(centers[:, 1].max()) + half + 1)
     window = category_maps[:, r0:r1, c0:c1]
-    rows, cols = _nonzero(window.any(axis=0))
+    # numpy types a reduction over an axis as maybe a scalar; over axis 0 of a 3-D array it is 2-D.
+    rows, cols = _nonzero(cast(npt.NDArray[np.bool_], window.any(axis=0)))
     if rows.size == 0:
         return [() for _ in centers]
     member = window[:, rows, cols]

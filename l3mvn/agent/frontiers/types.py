@@ -8,6 +8,7 @@ say why a frontier won without re-running the policy.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -59,7 +60,8 @@ class Fusion:
                 return (f"{head} <= {self.threshold:g}, so the first frontier by {name} with S_LLM > 0.1: "
                         f"F{self.ids[k]} ({name} {self.explore[k]:.2f}, S_LLM {self.compared[k]:.2f})")
             return f"{head} <= {self.threshold:g}, so the best {name}: " + self._versus(self.explore)
-        lo, hi = self.bound  # the paper's rule always has its bound
+        assert self.bound is not None  # the paper's rule always has its bound
+        lo, hi = self.bound
         head = f"bound B = [{lo:.2f}, {hi:.2f}]; max S_LLM {self.max_s_llm:.2f}"
         if self.branch == "language":
             return f"{head} is above B, so language alone decides: " + self._versus(self.s_llm)
@@ -72,7 +74,8 @@ class Fusion:
         return (f"{self.cost_m[k]:.1f} - {self.bonus_m[k]:.1f} + {self.expected_m[k]:.1f} "
                 f"= {self.compared[k]:.1f} m")
 
-    def _versus(self, values, *, least: bool = False, fmt=None) -> str:
+    def _versus(self, values: tuple[float, ...], *, least: bool = False,
+                fmt: Callable[[int], str] | None = None) -> str:
         """``F<choice> <value> beats F<runner-up> <value>`` (the best other frontier by ``values``)."""
         show = fmt or (lambda k: f"{values[k]:.2f}")
         k = self.choice

@@ -22,9 +22,11 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -69,7 +71,7 @@ class CooccurrenceStats:
     objects: dict[str, ObjectStats]
     informative: tuple[str, ...]
     goals: tuple[str, ...] = GOALS
-    provenance: dict = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
 
     def p_goal(self, name: str) -> dict[str, float]:
         key = canonical(name)
@@ -77,12 +79,12 @@ class CooccurrenceStats:
             raise L3MVNError(f"no co-occurrence statistics for {name!r}; known: {', '.join(sorted(self.objects))}")
         return self.objects[key].p_goal
 
-    def informative_in(self, names) -> tuple[str, ...]:
+    def informative_in(self, names: Iterable[str]) -> tuple[str, ...]:
         """The informative objects among ``names``, in the list's order (most informative first)."""
         present = {canonical(n) for n in names}
         return tuple(o for o in self.informative if o in present)
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         return {
             "provenance": self.provenance,
             "goals": list(self.goals),
@@ -95,7 +97,7 @@ class CooccurrenceStats:
         }
 
     @classmethod
-    def from_json(cls, data: dict) -> "CooccurrenceStats":
+    def from_json(cls, data: dict[str, Any]) -> "CooccurrenceStats":
         try:
             objects = {
                 name: ObjectStats(name, int(v["rooms"]), {g: float(p) for g, p in v["p_goal"].items()},
@@ -113,7 +115,7 @@ def build_stats(
     alpha: float = DEFAULT_ALPHA,
     min_rooms: int = DEFAULT_MIN_ROOMS,
     list_size: int = DEFAULT_LIST_SIZE,
-    provenance: dict | None = None,
+    provenance: dict[str, Any] | None = None,
 ) -> CooccurrenceStats:
     """Co-occurrence statistics of every object in ``rooms`` (see the module docstring)."""
     if alpha <= 0 or min_rooms < 1 or list_size < 1:

@@ -35,6 +35,7 @@ import random
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -136,7 +137,7 @@ def expected_choice(pred: torch.Tensor, lists: RankingLists) -> torch.Tensor:
 
 def _predict(head: GoalHead, table: torch.Tensor, lists: RankingLists) -> torch.Tensor:
     """(L, F) predicted metres to each list's goal."""
-    out = head(table)  # all unique sentences at once: BatchNorm sees the whole vocabulary
+    out: torch.Tensor = head(table)  # all unique sentences at once: BatchNorm sees the whole vocabulary
     per = out[lists.sentence]  # (L, F, G)
     return per.gather(2, lists.goal[:, None, None].expand(-1, per.shape[1], 1))[..., 0]
 
@@ -178,7 +179,7 @@ def train_frontier_head(
     seed: int = 0,
     command: str = "",
     bag: bool = False,
-) -> dict:
+) -> dict[str, Any]:
     """Train on the frontier files ``data``, keep the best-validation epoch, save to ``out`` (default:
     the shipped frontier head for ``model``, or for ``bag``) and return the metrics written into its
     meta. ``bag``: the input is the bag of window objects and ``model`` is not read."""
@@ -201,8 +202,9 @@ def train_frontier_head(
         torch.set_num_threads(threads)
 
 
-def _train(data, model, out, epochs, lr, weight_decay, batch_size, tau, calibration, cu_lambda, seed,
-           command, bag) -> dict:
+def _train(data: Sequence[str | Path], model: str, out: str | Path, epochs: int, lr: float, weight_decay: float,
+           batch_size: int, tau: float, calibration: float, cu_lambda: float, seed: int, command: str,
+           bag: bool) -> dict[str, Any]:
     torch.manual_seed(seed)
     random.seed(seed)
     np.random.seed(seed)
@@ -227,21 +229,27 @@ def _train(data, model, out, epochs, lr, weight_decay, batch_size, tau, calibrat
     with torch.no_grad():  # start at the mean distance per goal: the listwise term then only ranks
         mean = [float(train.dist[train.mask & (train.goal[:, None] == g)].mean()) if (train.goal == g).any() else 0.0
                 for g in range(len(GOALS))]
-        head.net[-1].bias.copy_(torch.tensor(mean))
+        last = head.net[-1]
+        assert isinstance(last, nn.Linear)  # GoalHead ends in its output layer
+        last.bias.copy_(torch.tensor(mean))
     opt = torch.optim.Adam(head.parameters(), lr=lr, weight_decay=weight_decay)
     gen = torch.Generator().manual_seed(seed)
-    best = (float("inf"), -1, None)
+    best: tuple[float, int, dict[str, torch.Tensor] | None] = (float("inf"), -1, None)
     for epoch in range(epochs):
         head.train()
         order = torch.randperm(len(train), generator=gen)
         for start in range(0, len(order), batch_size):
             batch = train.take(order[start : start + batch_size])
             opt.zero_grad()
-            _loss(_predict(head, table, batch), batch, tau, calibration).backward()
+            # torch leaves Tensor.backward unannotated.
+            _loss(_predict(head, table, batch), batch, tau, calibration).backward()  # type: ignore[no-untyped-call]
             opt.step()
         score = _scores(head, table, val)["regret_m"]
         if score < best[0]:
             best = (score, epoch, {k: v.clone() for k, v in head.state_dict().items()})
+    if best[2] is None:  # every epoch's validation regret was NaN or infinite: the training diverged
+        raise L3MVNError(f"training diverged: no epoch of {epochs} gave a finite validation regret; lower the "
+                         "learning rate or check the data for non-finite values")
     head.load_state_dict(best[2])
     metrics = {
         "best_epoch": best[1] + 1, "epochs": epochs,

@@ -16,6 +16,7 @@ from __future__ import annotations
 import io
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -72,17 +73,18 @@ class GoalHead(nn.Module):
         self.in_dim, self.n_goals, self.hidden = in_dim, n_goals, tuple(hidden)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x)
+        out: torch.Tensor = self.net(x)  # torch types a module call as Any
+        return out
 
 
-def save_head(head: GoalHead, meta: dict, path: str | Path) -> Path:
+def save_head(head: GoalHead, meta: dict[str, Any], path: str | Path) -> Path:
     meta = {**meta, "in_dim": head.in_dim, "n_goals": head.n_goals, "hidden": list(head.hidden)}
     encoded = io.BytesIO()
     torch.save({"state_dict": {k: v.detach().cpu() for k, v in head.state_dict().items()}, "meta": meta}, encoded)
     return write_file(path, encoded.getvalue(), "head weights")
 
 
-def load_head(path: str | Path) -> tuple[GoalHead, dict]:
+def load_head(path: str | Path) -> tuple[GoalHead, dict[str, Any]]:
     """(head in eval mode, meta) from a file written by ``save_head``."""
     path = Path(path)
     if not path.exists():

@@ -10,13 +10,20 @@ from __future__ import annotations
 
 import importlib.util
 import json
+from collections.abc import Callable
 from functools import lru_cache
 from pathlib import Path
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 import torch
 
 from l3mvn.core.errors import L3MVNError
+
+if TYPE_CHECKING:  # transformers is imported on first load: it is slow to import
+    from transformers import PreTrainedModel, PreTrainedTokenizerBase
+
+_Loaded = TypeVar("_Loaded")
 
 MINILM = "minilm"
 _MINILM_NAMES = (MINILM, "all-minilm-l6-v2", "sentence-transformers/all-minilm-l6-v2")
@@ -41,10 +48,11 @@ def resolve(name: str) -> str:
     return name
 
 
-def _load(loader, name: str, what: str):
+def _load(loader: Callable[[str], _Loaded], name: str, what: str) -> _Loaded:
     from transformers.utils import logging as hf_logging
 
-    hf_logging.disable_progress_bar()  # weight-loading bars would flood eval logs and the CLI
+    # Weight-loading bars would flood eval logs and the CLI. (transformers leaves it unannotated.)
+    hf_logging.disable_progress_bar()  # type: ignore[no-untyped-call]
     source = resolve(name)
     try:
         return loader(source)
@@ -55,7 +63,7 @@ def _load(loader, name: str, what: str):
 
 
 @lru_cache(maxsize=4)
-def load_masked_lm(name: str):
+def load_masked_lm(name: str) -> tuple[PreTrainedTokenizerBase, PreTrainedModel]:
     """(tokenizer, model in eval mode) of a masked LM such as ``roberta-large``."""
     from transformers import AutoModelForMaskedLM, AutoTokenizer
 
@@ -65,23 +73,26 @@ def load_masked_lm(name: str):
 
 
 @lru_cache(maxsize=4)
-def load_causal_lm(name: str):
+def load_causal_lm(name: str) -> tuple[PreTrainedTokenizerBase, PreTrainedModel]:
     """(tokenizer, model in eval mode) of a causal LM such as ``gpt2-large``."""
     from transformers import AutoModelForCausalLM, AutoTokenizer
 
     tok = _load(AutoTokenizer.from_pretrained, name, "causal-LM tokenizer")
     model = _load(AutoModelForCausalLM.from_pretrained, name, "causal LM")
-    return tok, model.eval()
+    return tok, model.eval()  # type: ignore[no-untyped-call]  # transformers leaves eval unannotated
 
 
 class SentenceEncoder:
     """Transformer + pooling (mean unless the model's ``1_Pooling`` config asks for CLS) + L2 norm,
     as sentence-transformers computes it, from plain ``transformers``."""
 
-    def __init__(self, tokenizer, model, pooling: str = "mean", batch_size: int = 64):
+    def __init__(self, tokenizer: PreTrainedTokenizerBase, model: PreTrainedModel, pooling: str = "mean",
+                 batch_size: int = 64) -> None:
         if pooling not in ("mean", "cls"):
             raise L3MVNError(f"unknown pooling {pooling!r}; valid: mean, cls")
-        self.tokenizer, self.model, self.pooling, self.batch_size = tokenizer, model.eval(), pooling, batch_size
+        # transformers leaves the model's eval unannotated.
+        self.tokenizer, self.model = tokenizer, model.eval()  # type: ignore[no-untyped-call]
+        self.pooling, self.batch_size = pooling, batch_size
 
     @property
     def dim(self) -> int:

@@ -119,6 +119,7 @@ def load_rooms(gibson_path: str | Path | None = None, thor_path: str | Path | No
         rooms += load_gibson_rooms(gibson)
     thor = Path(thor_path) if thor_path else default_thor_metadata_path()
     if thor_path or thor is not None:
+        assert thor is not None  # the path given, or the default found
         rooms += load_thor_rooms(thor)
     if not rooms:
         raise L3MVNError("no room data: pass the Gibson rooms .jsonl or install procthor for AI2-THOR rooms")

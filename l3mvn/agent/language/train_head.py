@@ -20,8 +20,10 @@ from __future__ import annotations
 
 import itertools
 import random
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -39,7 +41,7 @@ from l3mvn.agent.language.head import (
     is_bag,
     save_head,
 )
-from l3mvn.agent.language.models import MINILM, load_sentence_encoder
+from l3mvn.agent.language.models import MINILM, SentenceEncoder, load_sentence_encoder
 from l3mvn.agent.language.queries import feedforward_query
 from l3mvn.agent.language.rooms import Room, load_rooms, rooms_in
 from l3mvn.agent.language.vocabulary import GOALS
@@ -81,7 +83,7 @@ def train_head(
     max_objects: int = 3,
     seed: int = 0,
     bag: bool = False,
-) -> dict:
+) -> dict[str, Any]:
     """Train, keep the best-validation epoch, save to ``out`` (default: the shipped head for
     ``model``, or for ``bag``) and return the metrics written into the file's meta. ``bag``: the
     input is the bag of objects over the informative list and ``model`` is not read."""
@@ -114,7 +116,7 @@ def train_head(
     head = GoalHead(xt.shape[1], len(GOALS))
     opt = torch.optim.Adam(head.parameters(), lr=lr, weight_decay=weight_decay)
     loss_fn = nn.CrossEntropyLoss(reduction="none")
-    best = (float("inf"), -1, None)
+    best: tuple[float, int, dict[str, torch.Tensor] | None] = (float("inf"), -1, None)
     gen = torch.Generator().manual_seed(seed)
     for epoch in range(epochs):
         head.train()
@@ -130,6 +132,9 @@ def train_head(
         val_loss, _ = _evaluate(head, xv, yv, wv)
         if val_loss < best[0]:
             best = (val_loss, epoch, {k: v.clone() for k, v in head.state_dict().items()})
+    if best[2] is None:  # every epoch's validation loss was NaN or infinite: the training diverged
+        raise L3MVNError(f"training diverged: no epoch of {epochs} gave a finite validation loss; lower the "
+                         "learning rate or check the data for non-finite values")
     head.load_state_dict(best[2])
     train_loss, train_acc = _evaluate(head, xt, yt, wt)
     val_loss, val_acc = _evaluate(head, xv, yv, wv)
@@ -152,7 +157,8 @@ def train_head(
     return {**metrics, "path": str(out)}
 
 
-def _tensors(samples: list[Sample], featurise) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _tensors(samples: list[Sample], featurise: Callable[[list[tuple[str, ...]]], np.ndarray]
+             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``featurise`` maps object tuples to one input row each; it runs once per distinct tuple."""
     sets = sorted({s.objects for s in samples})
     rows = dict(zip(sets, np.asarray(featurise(sets), dtype=np.float32)))
@@ -162,7 +168,7 @@ def _tensors(samples: list[Sample], featurise) -> tuple[torch.Tensor, torch.Tens
     return x, y, w
 
 
-def _embed(encoder, texts: list[str]) -> np.ndarray:
+def _embed(encoder: SentenceEncoder, texts: list[str]) -> np.ndarray:
     """One embedding per text, each distinct text encoded once, in sorted order (batches, and so the
     padding each text is encoded with, do not depend on the sample order)."""
     unique = sorted(set(texts))
@@ -171,7 +177,7 @@ def _embed(encoder, texts: list[str]) -> np.ndarray:
 
 
 @torch.inference_mode()
-def _evaluate(head: GoalHead, x, y, w) -> tuple[float, float]:
+def _evaluate(head: GoalHead, x: torch.Tensor, y: torch.Tensor, w: torch.Tensor) -> tuple[float, float]:
     """Weighted cross-entropy and weighted top-1 accuracy (the label among six goals)."""
     head.eval()
     logits = head(x)
@@ -180,14 +186,15 @@ def _evaluate(head: GoalHead, x, y, w) -> tuple[float, float]:
     return loss, acc
 
 
-def _majority(yt, yv, wv) -> float:
+def _majority(yt: torch.Tensor, yv: torch.Tensor, wv: torch.Tensor) -> float:
     """Accuracy of always answering the most frequent training label: the floor to beat."""
     top = int(torch.bincount(yt, minlength=len(GOALS)).argmax())
     return float(((yv == top).float() * wv).sum() / wv.sum())
 
 
 def train_any_head(head: str, data: list[str] | None = None, model: str = MINILM, out: str | Path | None = None,
-                   gibson_rooms: str | Path | None = None, epochs: int | None = None, seed: int = 0) -> dict:
+                   gibson_rooms: str | Path | None = None, epochs: int | None = None,
+                   seed: int = 0) -> dict[str, Any]:
     """``l3mvn train-head``: a frontier head from ``data`` or a room-list head from room data, on
     sentence embeddings or (``*-bag``) bags of objects, each with its own default epochs; flags that
     do not apply to ``head`` are refused."""
@@ -199,7 +206,7 @@ def train_any_head(head: str, data: list[str] | None = None, model: str = MINILM
     bag = is_bag(head)
     if bag and model.lower() != MINILM:
         raise L3MVNError(f"--model names a sentence embedder; the {head} head reads no sentence (drop --model)")
-    extra = {} if epochs is None else {"epochs": epochs}
+    extra: dict[str, Any] = {} if epochs is None else {"epochs": epochs}
     if base_kind(head) == "rooms":
         if data:
             raise L3MVNError(f"--data is frontier data, for --head frontiers; the {head} head reads --gibson-rooms")

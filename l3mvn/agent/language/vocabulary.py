@@ -22,6 +22,7 @@ Queries use the canonical name, except where ``QUERY_PHRASES`` gives a more natu
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
@@ -83,7 +84,7 @@ def canonical(name: str) -> str:
     return ALIASES.get(folded, folded)
 
 
-def canonical_set(names) -> frozenset[str]:
+def canonical_set(names: Iterable[str]) -> frozenset[str]:
     return frozenset(canonical(n) for n in names)
 
 

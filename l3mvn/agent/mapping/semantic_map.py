@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
+import numpy.typing as npt
 
 from l3mvn.core.config import MapConfig, SimConfig
 from l3mvn.core.errors import L3MVNError
@@ -60,7 +62,8 @@ class SemanticMap:
 
     @property
     def size(self) -> int:
-        return self.obstacle.shape[0]
+        size: int = self.obstacle.shape[0]  # numpy types a shape's entries as Any
+        return size
 
     @property
     def current(self) -> np.ndarray:
@@ -86,7 +89,14 @@ class SemanticMap:
             )
         return row, col
 
-    def cell_to_world(self, row, col):
+    @overload
+    def cell_to_world(self, row: int, col: int) -> tuple[float, float]: ...
+
+    @overload
+    def cell_to_world(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def cell_to_world(self, row: int | np.ndarray,
+                      col: int | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
         """World (x, y) of the cell's centre; rows and columns may be arrays."""
         half = self.size // 2
         return (
@@ -103,10 +113,11 @@ class SemanticMap:
         out[ok] = self.explored[rows[ok], cols[ok]]
         return out
 
-    def category(self, name: str) -> np.ndarray:
+    def category(self, name: str) -> npt.NDArray[np.bool_]:
         if name not in self.category_names:
             raise L3MVNError(f"unknown map category {name!r}; valid: {', '.join(self.category_names)}")
-        return self.categories[self.category_names.index(name)]
+        plane: npt.NDArray[np.bool_] = self.categories[self.category_names.index(name)]  # numpy: indexing is Any
+        return plane
 
     def local_window(self) -> LocalWindow:
         """SemExp's local map: ``local_cells`` square centred on the agent, shifted to stay on the map."""
@@ -325,7 +336,7 @@ class SemanticMapper:
         cols = np.floor(xs / cfg.resolution_m).astype(np.int64) + half_cells
         rows = np.floor(ys / cfg.resolution_m).astype(np.int64) + half_cells
         inside = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size)
-        flat = rows[inside] * size + cols[inside]
+        flat: npt.NDArray[np.int64] = rows[inside] * size + cols[inside]
         self._explored.reshape(-1)[flat] = True
         near = np.broadcast_to(steps[None, :] <= cfg.look_distance_m, ok.shape)[ok][inside]
         self._looked.reshape(-1)[flat[near]] = True
@@ -369,7 +380,8 @@ class SemanticMapper:
         self._looked[rr, cc] = True
 
 
-def _cells(dx, dy, resolution_m: float, size: int) -> tuple[np.ndarray, np.ndarray]:
+def _cells(dx: float | np.ndarray, dy: float | np.ndarray, resolution_m: float,
+           size: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """(rows, cols) of offsets (dx, dy) from the map centre, in metres; scalars or arrays."""
     half = size // 2
     rows = np.floor(np.asarray(dy) / resolution_m).astype(np.int64) + half

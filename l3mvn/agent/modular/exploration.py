@@ -57,6 +57,7 @@ class ExplorationGoals:
 
     def done(self, reached: bool) -> None:
         """The current goal is done (reached, unreachable or stalled): never come back to it."""
+        assert self.cell is not None  # only a goal being pursued is done
         self.blocked.append(self.cell)
         if self.cell == self.pressing and reached:
             self.stood.add(self.cell)
@@ -76,6 +77,7 @@ class ExplorationGoals:
         return self.since_select >= self.cfg.replan_every and not keeps
 
     def _too_near_to_list(self, sem_map: SemanticMap) -> bool:
+        assert self.cell is not None  # asked by ``due`` only while there is a goal
         (r, c), (gr, gc) = sem_map.agent_cell, self.cell
         return math.hypot(r - gr, c - gc) * sem_map.resolution_m < self.config.frontiers.min_distance_m
 

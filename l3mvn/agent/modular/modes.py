@@ -270,11 +270,14 @@ class ExploreMode(GoalMode):
         if p.plan.reached:
             p = self.finish_looking(step, p)
         retries = 0
+        # Exploration goals are cells, planned every step (``_current``).
+        assert p.goal is not None and not isinstance(p.goal, np.ndarray) and p.plan is not None
         while self.wayfinder.done_with(p.goal, p.plan) and retries < self.cfg.max_reselect:
             self.explore.done(p.plan.reached)
             step.reselect(self.explore)
             p = self._current(step, None)
             retries += 1
+            assert p.goal is not None and not isinstance(p.goal, np.ndarray) and p.plan is not None
         return p
 
     def finish_looking(self, step: Step, p: Pursuit) -> Pursuit:
@@ -297,6 +300,7 @@ class ExploreMode(GoalMode):
         return p
 
     def before_escape(self, step: Step, p: Pursuit) -> None:
+        assert self.explore.cell is not None  # the goal this step escapes from
         self.explore.blocked.append(self.explore.cell)
 
     def _current(self, step: Step, last_move: float | None) -> Pursuit:

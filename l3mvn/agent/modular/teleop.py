@@ -11,17 +11,20 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from l3mvn.agent.modular.map_agent import MapAgent
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.decision import Decision
+from l3mvn.agent.modular.map_agent import MapAgent
+from l3mvn.agent.policies.global_policies import GlobalPolicy
+from l3mvn.core.config import Config
+from l3mvn.core.errors import L3MVNError
 from l3mvn.core.types import Action, Observation
 
 
 class TeleopAgent(MapAgent):
     """``MapAgent`` whose next action is the one last given to ``drive``; it never acts on its own."""
 
-    def __init__(self, *args, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
+    def __init__(self, global_policy: GlobalPolicy, categories: tuple[str, ...], config: Config,
+                 seed: int = 0) -> None:
+        super().__init__(global_policy, categories, config, seed)
         self._driven: Action | None = None
 
     def drive(self, action: Action | int | str) -> None:

@@ -100,6 +100,7 @@ class Wayfinder:
             # That rule measures straight-line distance, through walls: head for the nearest cell
             # within stop distance of the target, which may be the far side of its room's wall
             # (else a target seen through a doorway sends the agent the long way round).
+            assert isinstance(goal, np.ndarray)  # the target is a mask of cells
             goal, radius, dilation = _within(goal, self.cfg.stop_distance_m / sem_map.resolution_m), 0.0, 0.0
         elif kind == GoalKind.TARGET:
             radius, dilation = self.cfg.stop_distance_m, None

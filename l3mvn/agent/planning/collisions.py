@@ -18,6 +18,7 @@ import collections
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from l3mvn.core.config import PlannerConfig
 from l3mvn.core.errors import L3MVNError
@@ -33,7 +34,7 @@ class CollisionTracker:
             raise L3MVNError(f"need body_radius_m >= 0 and forward_step_m > 0, got {body_radius_m}, {forward_step_m}")
         self.cfg, self.resolution_m = cfg, resolution_m
         self._body_cells, self._step_cells = body_radius_m / resolution_m, forward_step_m / resolution_m
-        self.map: np.ndarray | None = None
+        self.map: npt.NDArray[np.bool_] | None = None
         self._cells = np.zeros((0, 2), dtype=np.int32)  # the marked cells, in marking order
         self._fresh = 0  # how many of them the last record() added
         self._beside: tuple[np.ndarray, np.ndarray] | None = None  # the last step's alternative mark
@@ -94,6 +95,7 @@ class CollisionTracker:
 
     def swap_last_mark(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Replace the cells the last step marked with ``(rows, cols)``; returns the cells replaced."""
+        assert self.map is not None  # a mark was laid, so ``start`` allocated the map
         kept = len(self._cells) - self._fresh
         gone = self._cells[kept:]
         self.map[gone[:, 0], gone[:, 1]] = False
@@ -102,6 +104,7 @@ class CollisionTracker:
         return gone[:, 0].astype(np.int64), gone[:, 1].astype(np.int64)
 
     def _mark(self, rows: np.ndarray, cols: np.ndarray) -> None:
+        assert self.map is not None  # ``start`` comes before any mark
         fresh = np.unique((rows * self.map.shape[1] + cols)[~self.map[rows, cols]])
         self.map[rows, cols] = True
         self._fresh = len(fresh)
@@ -123,6 +126,7 @@ class CollisionTracker:
         sin_h, cos_h = math.sin(heading), math.cos(heading)
         rows = np.rint(agent[0] + a * sin_h + s * cos_h).astype(np.int64).ravel()
         cols = np.rint(agent[1] + a * cos_h - s * sin_h).astype(np.int64).ravel()
+        assert self.map is not None  # ``start`` comes before any mark
         shape = self.map.shape
         ok = (rows >= 0) & (rows < shape[0]) & (cols >= 0) & (cols < shape[1])
         ok &= (rows != agent[0]) | (cols != agent[1])

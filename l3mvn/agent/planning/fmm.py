@@ -10,6 +10,7 @@ belong to, so callers index it in map cells and never juggle offsets.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 import numpy.ma as ma
@@ -74,7 +75,13 @@ class Window:
             self.r0 <= other.r0 and self.c0 <= other.c0 and other.r1 <= self.r1 and other.c1 <= self.c1
         )
 
-    def inside(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    @overload
+    def inside(self, rows: int, cols: int) -> bool: ...
+
+    @overload
+    def inside(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray: ...
+
+    def inside(self, rows: np.ndarray | int, cols: np.ndarray | int) -> np.ndarray | bool:
         """Which of the given map cells lie in the window."""
         return (rows >= self.r0) & (rows < self.r1) & (cols >= self.c0) & (cols < self.c1)
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from l3mvn.core.config import PlannerConfig
 from l3mvn.core.errors import L3MVNError
@@ -32,13 +33,20 @@ from l3mvn.agent.planning.steering import TIE_WEIGHT, Steering
 _SLACK_M = 0.10
 _SLACK_REL = 0.03
 
+# A goal as the cache knows it: its cells (rows, cols as bytes), the dilation and the obstacle growth.
+_GoalKey = tuple[bytes, bytes, int, bool]
+
 
 @dataclass
 class _GoalField:
-    goal_key: tuple
+    goal_key: _GoalKey
     traversible: np.ndarray
     sources: np.ndarray
     field: GeodesicField
+
+
+# What ``GoalFields.saved`` hands out: the cached fields and the goal the way keeps the narrow margin to.
+_Saved = tuple[dict[bool, _GoalField], tuple[bytes, bytes, int] | None]
 
 
 class GoalFields:
@@ -63,7 +71,7 @@ class GoalFields:
         """A new episode: its collision marks, no cached field, no marches counted."""
         self._collisions = collisions
         self._cache: dict[bool, _GoalField] = {}
-        self._narrow_goal: tuple | None = None
+        self._narrow_goal: tuple[bytes, bytes, int] | None = None
         self.fmm_runs = 0
 
     def forget(self) -> None:
@@ -71,11 +79,11 @@ class GoalFields:
         self._cache = {}
         self._narrow_goal = None
 
-    def saved(self) -> tuple:
+    def saved(self) -> _Saved:
         """The cached fields and the clearance choice, for ``restore`` after a trial plan."""
         return dict(self._cache), self._narrow_goal
 
-    def restore(self, saved: tuple) -> None:
+    def restore(self, saved: _Saved) -> None:
         """Back to the state ``saved`` returned: a trial plan on other marks leaves nothing behind."""
         cache, self._narrow_goal = saved
         self._cache = dict(cache)
@@ -113,7 +121,17 @@ class GoalFields:
             self._narrow_goal = goal
         return narrow[0], narrow[1], narrow[2], True
 
-    def _field_to(self, obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, marks, wide):
+    def _field_to(
+        self,
+        obstacle: np.ndarray,
+        agent: tuple[int, int],
+        goal_rows: np.ndarray,
+        goal_cols: np.ndarray,
+        nearest_goal: tuple[int, int],
+        dilation: int,
+        marks: bool,
+        wide: bool,
+    ) -> tuple[GeodesicField, np.ndarray, tuple[int, int] | None, bool]:
         """``field_to`` at one obstacle growth (``wide``: with the clearance); each growth keeps its
         own cached field, so comparing the two does not replan both every step."""
         key = (goal_rows.tobytes(), goal_cols.tobytes(), dilation, wide)
@@ -163,7 +181,8 @@ class GoalFields:
         limit = math.inf if max_distance_m is None else float(max_distance_m)
         return GeodesicField(values, window, obstacle.shape, limit)
 
-    def _traversible(self, obstacle: np.ndarray, window: Window, marks: bool = True, wide: bool = False) -> np.ndarray:
+    def _traversible(self, obstacle: np.ndarray, window: Window, marks: bool = True,
+                     wide: bool = False) -> npt.NDArray[np.bool_]:
         """Not (dilated obstacle) and, with ``marks``, not collision, over ``window`` (obstacles just
         outside count); ``wide``: grown by the clearance too."""
         pad = window.grown(self._growth[wide], obstacle.shape)
@@ -171,18 +190,23 @@ class GoalFields:
         kernel = self._obstacle_kernels[wide]
         dilated = cv2.dilate(crop, kernel) if kernel.size > 1 else crop
         inner = dilated[window.r0 - pad.r0 : window.r1 - pad.r0, window.c0 - pad.c0 : window.c1 - pad.c0]
-        return (inner == 0) & ~self._collisions.map[window.slices] if marks else inner == 0
+        clear: npt.NDArray[np.bool_] = inner == 0  # cv2's result is typed as any number array
+        if not marks:
+            return clear
+        assert self._collisions.map is not None  # the planner starts the tracker before any field
+        return clear & ~self._collisions.map[window.slices]
 
     def _with_escape(
         self, trav: np.ndarray, obstacle: np.ndarray, window: Window, agent: tuple[int, int], wide: bool = False
-    ) -> np.ndarray:
+    ) -> npt.NDArray[np.bool_]:
         """Open the undilated free cells around the agent, so dilation cannot trap it in place."""
         rows = self._escape_offsets[wide][:, 0] + agent[0]
         cols = self._escape_offsets[wide][:, 1] + agent[1]
         ok = window.inside(rows, cols)
         rows, cols = rows[ok], cols[ok]
+        assert self._collisions.map is not None  # the planner starts the tracker before any field
         free = ~obstacle[rows, cols] & ~self._collisions.map[rows, cols]
-        out = trav.copy()
+        out: npt.NDArray[np.bool_] = trav.copy()
         out[rows[free] - window.r0, cols[free] - window.c0] = True
         out[agent[0] - window.r0, agent[1] - window.c0] = True
         return out
@@ -262,19 +286,19 @@ class GoalFields:
 
     def _whole_window(self, obstacle: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> Window:
         """The window around the given cells and every obstacle and collision mark: exact."""
-        rows, cols = [rows], [cols]
+        all_rows, all_cols = [rows], [cols]
         for extent in (_extent(obstacle), _extent(self._collisions.map)):
             if extent is not None:
-                rows.append(np.array(extent[:2]))
-                cols.append(np.array(extent[2:]))
+                all_rows.append(np.array(extent[:2]))
+                all_cols.append(np.array(extent[2:]))
         margin = max(self._growth[True], self.goal_dilation_cells) + 2
-        return Window.bounding(np.concatenate(rows), np.concatenate(cols), margin, obstacle.shape)
+        return Window.bounding(np.concatenate(all_rows), np.concatenate(all_cols), margin, obstacle.shape)
 
     def _reusable(
         self,
         obstacle: np.ndarray,
         agent: tuple[int, int],
-        goal_key: tuple,
+        goal_key: _GoalKey,
         nearest_goal: tuple[int, int],
         wide: bool = False,
     ) -> tuple[GeodesicField, np.ndarray, tuple[int, int]] | None:

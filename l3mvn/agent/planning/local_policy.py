@@ -149,6 +149,7 @@ class LocalPlanner:
         beside = self._collisions.beside
         marked_beside = beside is not None and replanned and self._marks_make_detour(*replan, d_agent)
         if marked_beside:
+            assert beside is not None  # ``marked_beside`` requires it
             across, kept = self._collisions.swap_last_mark(*beside), self._fields.saved()
             plan_across = field, trav, stg, replanned, d_agent
             field, trav, stg, replanned, d_agent = self._field_anew(*replan)
@@ -191,14 +192,20 @@ class LocalPlanner:
             marked_beside=marked_beside,
         )
 
-    def _field_anew(self, obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation):
+    def _field_anew(
+        self, obstacle: np.ndarray, agent: tuple[int, int], goal_rows: np.ndarray, goal_cols: np.ndarray,
+        nearest_goal: tuple[int, int], dilation: int,
+    ) -> tuple[GeodesicField, np.ndarray, tuple[int, int] | None, bool, float]:
         """``field_to`` after the collision marks changed under the cached field, and the agent's distance."""
         self._fields.forget()
         field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols, nearest_goal,
                                                             dilation)
         return field, trav, stg, replanned, float(field.at(*agent))
 
-    def _marks_make_detour(self, obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, d_agent) -> bool:
+    def _marks_make_detour(
+        self, obstacle: np.ndarray, agent: tuple[int, int], goal_rows: np.ndarray, goal_cols: np.ndarray,
+        nearest_goal: tuple[int, int], dilation: int, d_agent: float,
+    ) -> bool:
         """Whether the collision marks lengthen the way to the goal by more than
         ``target_mark_detour_m`` (or close it)."""
         if not len(self._collisions.cells):

@@ -12,10 +12,12 @@ from typing import Protocol
 
 import cv2
 import numpy as np
+import numpy.typing as npt
 
 from l3mvn.agent.frontiers import Frontier, Fusion
-from l3mvn.core.grid import disk
+from l3mvn.agent.mapping import LocalWindow, SemanticMap
 from l3mvn.agent.planning import distance_field
+from l3mvn.core.grid import disk
 
 
 @dataclass(frozen=True)
@@ -44,7 +46,8 @@ class Selection:
 class GlobalPolicy(Protocol):
     name: str
 
-    def select(self, frontiers: list[Frontier], sem_map, goal: str, rng: np.random.Generator) -> Selection | None:
+    def select(self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str,
+               rng: np.random.Generator) -> Selection | None:
         """None when there is nothing to choose (no frontier)."""
 
 
@@ -59,7 +62,8 @@ class NearestFrontier:
 
     name = "frontier"
 
-    def select(self, frontiers, sem_map, goal, rng):
+    def select(self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str,
+               rng: np.random.Generator) -> Selection | None:
         if not frontiers:
             return None
         d = np.array([f.cost for f in frontiers], dtype=np.float64)
@@ -72,7 +76,8 @@ class CostUtility:
 
     name = "cost-utility"
 
-    def select(self, frontiers, sem_map, goal, rng):
+    def select(self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str,
+               rng: np.random.Generator) -> Selection | None:
         if not frontiers:
             return None
         scores = np.array([f.s_cu for f in frontiers], dtype=np.float64)
@@ -104,7 +109,8 @@ class RandomSample:
         self.dilation = obstacle_dilation_cells
         self._kernel = disk(obstacle_dilation_cells).astype(np.uint8)
 
-    def select(self, frontiers, sem_map, goal, rng):
+    def select(self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str,
+               rng: np.random.Generator) -> Selection | None:
         win = sem_map.local_window()
         r0, _, c0, _ = win.bounds
         walls = self._walls(win)
@@ -126,12 +132,12 @@ class RandomSample:
         cell = (int(r) + r0, int(c) + c0)
         return Selection(None, cell, np.zeros(len(frontiers)), f"random map cell {cell}")
 
-    def _walls(self, win) -> np.ndarray:
+    def _walls(self, win: LocalWindow) -> np.ndarray:
         """Obstacles dilated as the planner dilates them, the agent's own surroundings left open (the
         planner's escape does the same: dilation never traps the agent where it stands)."""
         if not self.dilation:
             return win.obstacle
-        walls = cv2.dilate(win.obstacle.view(np.uint8), self._kernel).astype(bool)
+        walls: npt.NDArray[np.bool_] = cv2.dilate(win.obstacle.view(np.uint8), self._kernel).astype(bool)
         k, (r, c) = self.dilation, win.agent_cell
         near = (slice(max(r - k, 0), r + k + 1), slice(max(c - k, 0), c + k + 1))
         walls[near] = win.obstacle[near]

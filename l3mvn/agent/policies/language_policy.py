@@ -25,29 +25,47 @@ bench, bench/bench_frontier_regret.py).
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from functools import lru_cache
+from typing import TYPE_CHECKING, Any, Protocol, TypeGuard
 
 import numpy as np
 
+from l3mvn.agent.frontiers import Frontier, Fusion
+from l3mvn.agent.mapping import SemanticMap
+from l3mvn.agent.policies.global_policies import LanguageScore, Selection
 from l3mvn.core.config import SELECTIONS, FrontierConfig, PolicyConfig
 from l3mvn.core.config.policy import HEAD_SCORER
 from l3mvn.core.errors import L3MVNError
-from l3mvn.agent.frontiers import Frontier, Fusion
-from l3mvn.agent.policies.global_policies import LanguageScore, Selection
+
+if TYPE_CHECKING:  # the language package loads its models' libraries: only on first use
+    from l3mvn.agent.language import Scorer
 
 
 
 LISTWISE_TEMPERATURE_M = 1.0  # the frontier head's training tau (frontier_head.train_frontier_head)
 
 
-def shared_scorer(name: str, head: str | None = None):
+class _DistanceScorer(Protocol):
+    """A scorer whose head predicts the metres from each frontier to each goal (``predicts_distance``)."""
+
+    goals: tuple[str, ...]
+
+    def expected_distance(self, object_sets: Sequence[Iterable[str]]) -> np.ndarray: ...
+
+
+def _predicts_distance(scorer: Scorer) -> TypeGuard[_DistanceScorer]:
+    return bool(getattr(scorer, "predicts_distance", False))
+
+
+def shared_scorer(name: str, head: str | None = None) -> Scorer:
     """One scorer per process, name and head: models load once and the (object set, goal) cache is
     shared across episodes, where the same object sets keep recurring."""
     return _shared_scorer(name, head)
 
 
 @lru_cache(maxsize=4)
-def _shared_scorer(name: str, head: str | None):
+def _shared_scorer(name: str, head: str | None) -> Scorer:
     from l3mvn.agent.language import make_scorer
 
     if head is None:
@@ -77,7 +95,7 @@ class LanguageFrontierPolicy:
         self.bound, self.head, self.cu_lambda = bound, head, cu_lambda
         self.scorer = self._make(scorer)
 
-    def _make(self, scorer: str):
+    def _make(self, scorer: str) -> Scorer:
         made = shared_scorer(scorer, self.head if scorer == HEAD_SCORER else None)
         if self.selection == "expected" and not getattr(made, "predicts_distance", False):
             raise L3MVNError(f"selection 'expected' needs a scorer that predicts distances (feedforward with "
@@ -87,20 +105,23 @@ class LanguageFrontierPolicy:
     def set_scorer(self, scorer: str) -> None:
         self.scorer_name, self.scorer = scorer, self._make(scorer)
 
-    def select(self, frontiers: list[Frontier], sem_map, goal: str, rng) -> Selection | None:
+    def select(self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str,
+               rng: np.random.Generator) -> Selection | None:
         if not frontiers:
             return None
         objects = [f.objects for f in frontiers]
         dists = self.scorer.score(objects)
         s_llm = np.array([d[goal] for d in dists])
         explore = self._exploration(frontiers)
-        metres = all_metres = None
-        if getattr(self.scorer, "predicts_distance", False):
+        metres: np.ndarray | None = None
+        all_metres: np.ndarray | None = None
+        if _predicts_distance(self.scorer):
             all_metres = self.scorer.expected_distance(objects)
             metres = all_metres[:, self.scorer.goals.index(goal)]
             z = -metres / LISTWISE_TEMPERATURE_M
             s_llm = np.exp(z - z.max()) / np.exp(z - z.max()).sum()
         if self.selection == "expected":
+            assert metres is not None  # ``_make`` gives selection "expected" a scorer that predicts distances
             i, reason, fused, fusion = self._expected(frontiers, metres, s_llm, explore)
         elif self.selection == "official_code":
             i, reason, fusion = self._official(frontiers, s_llm, explore)
@@ -117,7 +138,7 @@ class LanguageFrontierPolicy:
         return Selection(i, frontiers[i].center, np.asarray(fused, dtype=np.float64), reason, language, fusion)
 
     def _fusion(self, frontiers: list[Frontier], branch: str, choice: int, s_llm: np.ndarray, explore: np.ndarray,
-                compared: np.ndarray, **numbers) -> Fusion:
+                compared: np.ndarray, **numbers: Any) -> Fusion:
         """The record of what the rule compared (the same arrays it ranked, as plain floats)."""
         return Fusion(rule=self.selection, branch=branch, choice=choice, ids=tuple(f.id for f in frontiers),
                       s_llm=tuple(map(float, s_llm)), explore=tuple(map(float, explore)),

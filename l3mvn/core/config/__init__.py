@@ -188,7 +188,7 @@ def number(raw: str, kind: type, where: str) -> int | float:
     if not raw.isascii():
         raise L3MVNError(f"{where} expects {article} {kind.__name__} in ASCII digits, got {raw!r}")
     try:
-        value = kind(raw)
+        value: int | float = kind(raw)
     except (TypeError, ValueError, OverflowError):
         raise L3MVNError(f"{where} expects {article} {kind.__name__}, got {raw!r}") from None
     if isinstance(value, float) and not math.isfinite(value):

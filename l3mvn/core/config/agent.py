@@ -86,8 +86,9 @@ class AgentConfig:
         if self.escape_after_unreachable < 1:
             raise L3MVNError(f"escape_after_unreachable must be >= 1, got {self.escape_after_unreachable}")
         lengths = {"blocked_radius_m": self.blocked_radius_m, "candidate_reached_m": self.candidate_reached_m}
-        if bad := {k: v for k, v in lengths.items() if not v > 0}:
-            raise L3MVNError(f"{', '.join(bad)} must be positive, got {', '.join(map(str, bad.values()))}")
+        if nonpositive := {k: v for k, v in lengths.items() if not v > 0}:
+            raise L3MVNError(f"{', '.join(nonpositive)} must be positive, "
+                             f"got {', '.join(map(str, nonpositive.values()))}")
         if self.look_min_area_m2 < 0 or self.commitment_margin < 0 or self.explore_goal_dilation_m < 0:
             raise L3MVNError("look_min_area_m2, commitment_margin and explore_goal_dilation_m must be >= 0")
         if not 0 < self.frontier_press_m < self.frontier_reached_m:

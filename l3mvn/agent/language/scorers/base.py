@@ -12,6 +12,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import cache
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -110,15 +111,17 @@ class Scorer(ABC):
     def _normalise(self, raw: np.ndarray) -> np.ndarray:
         z = raw / self.temperature
         e = np.exp(z - z.max())
-        return e / e.sum()
+        p: np.ndarray = e / e.sum()  # numpy types the division as Any
+        return p
 
 
 _REGISTRY: dict[str, Callable[..., Scorer]] = {}
 PLUGIN_GROUP = "l3mvn.scorers"  # a researcher's own scorers: entry points naming a Scorer subclass
+_ScorerClass = TypeVar("_ScorerClass", bound=type[Scorer])
 
 
-def register(name: str):
-    def wrap(cls):
+def register(name: str) -> Callable[[_ScorerClass], _ScorerClass]:
+    def wrap(cls: _ScorerClass) -> _ScorerClass:
         cls.name = name
         _REGISTRY[name] = cls
         return cls
@@ -130,7 +133,7 @@ def scorer_names() -> tuple[str, ...]:
     return tuple(sorted(_built_in())) + tuple(_plugins()[0])
 
 
-def make_scorer(name: str, **options) -> Scorer:
+def make_scorer(name: str, **options: Any) -> Scorer:
     """A scorer by registry name (``mlm``, ``causal``, ``embedding``, ``roomtype``, ``feedforward``, or a
     plugin's) with its options (``model=...``, ``temperature=...``, ``object_filter=...``, ...)."""
     plugins, problems = _plugins()

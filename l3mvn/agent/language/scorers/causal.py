@@ -9,6 +9,7 @@ code. ``template="paper"`` uses the paper's "A frontier area containing ..." ins
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 import torch
 
@@ -18,6 +19,9 @@ from l3mvn.agent.language.queries import object_list, zero_shot_query
 from l3mvn.agent.language.scorers.base import ObjectKey, Scorer, register
 from l3mvn.agent.language.vocabulary import check_goal
 
+if TYPE_CHECKING:
+    from transformers import PreTrainedModel, PreTrainedTokenizerBase
+
 TEMPLATES = ("code", "paper")
 
 
@@ -26,7 +30,8 @@ class CausalLMScorer(Scorer):
     temperature = 1.0
 
     def __init__(self, model: str = "gpt2-large", template: str = "code", batch_size: int = 32,
-                 tokenizer_and_model=None, **kw):
+                 tokenizer_and_model: tuple[PreTrainedTokenizerBase, PreTrainedModel] | None = None,
+                 **kw: Any) -> None:
         super().__init__(**kw)
         if template not in TEMPLATES:
             raise L3MVNError(f"unknown causal template {template!r}; valid: {', '.join(TEMPLATES)}")

@@ -17,6 +17,7 @@ room list and temperatures were chosen by hand and checked on the train/val buil
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -31,7 +32,7 @@ ROOM_TYPES: tuple[str, ...] = (
 
 
 class _EmbeddingBase(Scorer):
-    def __init__(self, model: str = MINILM, **kw):
+    def __init__(self, model: str = MINILM, **kw: Any) -> None:
         super().__init__(**kw)
         self.model_name = model
         self.encoder = load_sentence_encoder(model)
@@ -56,7 +57,8 @@ class EmbeddingScorer(_EmbeddingBase):
     def _raw_scores(self, pairs: list[tuple[ObjectKey, str]]) -> Sequence[float]:
         ctx = self.embed([f"A frontier area containing {object_list(objs)}." for objs, _ in pairs])
         goal = self.embed([f"A frontier area containing a {query_phrase(g)}." for _, g in pairs])
-        return (ctx * goal).sum(1).tolist()
+        cosines: list[float] = (ctx * goal).sum(1).tolist()  # numpy types tolist() as Any
+        return cosines
 
 
 @register("roomtype")
@@ -67,7 +69,7 @@ class RoomTypeScorer(_EmbeddingBase):
     room_temperature = 0.05
     goal_temperature = 0.05
 
-    def __init__(self, room_types: tuple[str, ...] = ROOM_TYPES, **kw):
+    def __init__(self, room_types: tuple[str, ...] = ROOM_TYPES, **kw: Any) -> None:
         super().__init__(**kw)
         self.room_types = tuple(room_types)
         rooms = self.embed([f"A {r}." for r in self.room_types])
@@ -93,4 +95,5 @@ class RoomTypeScorer(_EmbeddingBase):
 
 def _softmax(z: np.ndarray) -> np.ndarray:
     e = np.exp(z - z.max(axis=-1, keepdims=True))
-    return e / e.sum(axis=-1, keepdims=True)
+    p: np.ndarray = e / e.sum(axis=-1, keepdims=True)  # numpy types the division as Any
+    return p

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -46,7 +47,7 @@ class FeedForwardScorer(Scorer):
     temperature = 1.0
     distance_temperature_m = 1.0
 
-    def __init__(self, model: str = MINILM, head: str | Path | None = None, **kw):
+    def __init__(self, model: str = MINILM, head: str | Path | None = None, **kw: Any) -> None:
         super().__init__(**kw)
         head = DEFAULT_HEAD if head is None else head
         if isinstance(head, str) and head in HEAD_KINDS:
@@ -91,11 +92,13 @@ class FeedForwardScorer(Scorer):
         """The head's input rows: the bag of objects, or the embedding of the paper's sentence."""
         if self.vocabulary is not None:
             return bag_features(keys, self.vocabulary)
+        assert self.encoder is not None  # a head without a vocabulary reads sentence embeddings
         return self.encoder.encode([feedforward_query(k) for k in keys])
 
     @torch.inference_mode()
     def logits(self, keys: list[ObjectKey]) -> torch.Tensor:
-        return self.head(torch.from_numpy(self.features(keys)))
+        out: torch.Tensor = self.head(torch.from_numpy(self.features(keys)))  # torch types a module call as Any
+        return out
 
     def expected_distance(self, object_sets: Sequence[Iterable[str]]) -> np.ndarray:
         """(frontiers, goals) expected metres from each frontier to each goal (frontier head only);
@@ -112,7 +115,7 @@ class FeedForwardScorer(Scorer):
         super().clear_cache()
         self._metres.clear()
 
-    def queries(self, objects) -> dict[str, str]:
+    def queries(self, objects: Iterable[str]) -> dict[str, str]:
         """One input for all goals: the head reads the sentence's embedding (or the bag of objects,
         shown as such: no sentence exists for a bag head) and outputs every goal's number."""
         key = self.query_objects(objects)

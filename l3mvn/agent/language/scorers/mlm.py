@@ -10,6 +10,7 @@ naming t (multi-token goal names such as "potted plant" pay for their extra toke
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 import torch
 
@@ -18,12 +19,17 @@ from l3mvn.agent.language.models import load_masked_lm
 from l3mvn.agent.language.queries import zero_shot_query
 from l3mvn.agent.language.scorers.base import ObjectKey, Scorer, register
 
+if TYPE_CHECKING:
+    from transformers import PreTrainedModel, PreTrainedTokenizerBase
+
 
 @register("mlm")
 class MaskedLMScorer(Scorer):
     temperature = 1.0
 
-    def __init__(self, model: str = "roberta-large", batch_size: int = 64, tokenizer_and_model=None, **kw):
+    def __init__(self, model: str = "roberta-large", batch_size: int = 64,
+                 tokenizer_and_model: tuple[PreTrainedTokenizerBase, PreTrainedModel] | None = None,
+                 **kw: Any) -> None:
         super().__init__(**kw)
         if batch_size < 1:
             raise L3MVNError(f"batch_size must be >= 1, got {batch_size}")
