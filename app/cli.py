@@ -24,36 +24,77 @@ def _typed(kind: type, flag: str):
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from l3mvn_studio.origin import ALLOW_ORIGIN_FLAG
     from l3mvn.run.registry import policy_names
+    from l3mvn_studio.origin import ALLOW_ORIGIN_FLAG
 
     parser.add_argument("--dataset", default=None, help="SemExp-format dataset directory (default: procedural houses)")
-    parser.add_argument("--scenes", default=None, metavar="DIR",
-                        help="scan root of a habitat ObjectNav --dataset (e.g. data/scene_datasets)")
+    parser.add_argument(
+        "--scenes",
+        default=None,
+        metavar="DIR",
+        help="scan root of a habitat ObjectNav --dataset (e.g. data/scene_datasets)",
+    )
     parser.add_argument("--split", default="val", help="split name inside --dataset (default: val)")
-    parser.add_argument("--houses", type=_typed(int, "--houses"), default=3, help="procedural houses when no --dataset (default 3)")
-    parser.add_argument("--episodes-per-house", type=_typed(int, "--episodes-per-house"), default=5, help="procedural episodes per house (default 5)")
-    parser.add_argument("--seed", type=_typed(int, "--seed"), default=0, help="seed for procedural houses, episodes and policies")
-    parser.add_argument("--policy", choices=policy_names(), default="l3mvn-zs", help="policy selected when the page opens (changeable in the page)")
-    parser.add_argument("--host", default="127.0.0.1",
-                        help="interface to bind (default 127.0.0.1; anything else exposes the controls)")
-    parser.add_argument(ALLOW_ORIGIN_FLAG, action="append", default=[], metavar="ORIGIN", dest="allow_origin",
-                        help="also accept pages served from ORIGIN (scheme://host[:port], e.g. a reverse "
-                             "proxy's https://studio.example.com); repeatable. By default only "
-                             "http://127.0.0.1:PORT, http://localhost:PORT and http://HOST:PORT may connect")
+    parser.add_argument(
+        "--houses", type=_typed(int, "--houses"), default=3, help="procedural houses when no --dataset (default 3)"
+    )
+    parser.add_argument(
+        "--episodes-per-house",
+        type=_typed(int, "--episodes-per-house"),
+        default=5,
+        help="procedural episodes per house (default 5)",
+    )
+    parser.add_argument(
+        "--seed", type=_typed(int, "--seed"), default=0, help="seed for procedural houses, episodes and policies"
+    )
+    parser.add_argument(
+        "--policy",
+        choices=policy_names(),
+        default="l3mvn-zs",
+        help="policy selected when the page opens (changeable in the page)",
+    )
+    parser.add_argument(
+        "--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1; anything else exposes the controls)"
+    )
+    parser.add_argument(
+        ALLOW_ORIGIN_FLAG,
+        action="append",
+        default=[],
+        metavar="ORIGIN",
+        dest="allow_origin",
+        help="also accept pages served from ORIGIN (scheme://host[:port], e.g. a reverse "
+        "proxy's https://studio.example.com); repeatable. By default only "
+        "http://127.0.0.1:PORT, http://localhost:PORT and http://HOST:PORT may connect",
+    )
     parser.add_argument("--port", type=_typed(int, "--port"), default=8080, help="port (default 8080)")
-    parser.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
-                        help="override any config field, as for `l3mvn eval` (`l3mvn config` lists them)")
-    parser.add_argument("--speed", type=_typed(float, "--speed"), default=4.0, help="steps per second while running (default 4)")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.FIELD=VALUE",
+        help="override any config field, as for `l3mvn eval` (`l3mvn config` lists them)",
+    )
+    parser.add_argument(
+        "--speed", type=_typed(float, "--speed"), default=4.0, help="steps per second while running (default 4)"
+    )
     parser.add_argument("--record", action="store_true", help="record each episode to recordings/*.rrd")
-    parser.add_argument("--record-dir", default=None, metavar="DIR",
-                        help="where --record and the Results panel's re-runs write (default: recordings/ for "
-                             "--record, reruns/ beside --recordings for re-runs; never the eval's recordings)")
-    parser.add_argument("--results", default=None, metavar="DIR",
-                        help="add a Results panel over the eval result files (*.jsonl) in DIR")
-    parser.add_argument("--recordings", default=None, metavar="DIR",
-                        help="where the Results panel reads the eval's recordings (default recordings/, "
-                             "where `l3mvn eval --record` writes); never written to")
+    parser.add_argument(
+        "--record-dir",
+        default=None,
+        metavar="DIR",
+        help="where --record and the Results panel's re-runs write (default: recordings/ for "
+        "--record, reruns/ beside --recordings for re-runs; never the eval's recordings)",
+    )
+    parser.add_argument(
+        "--results", default=None, metavar="DIR", help="add a Results panel over the eval result files (*.jsonl) in DIR"
+    )
+    parser.add_argument(
+        "--recordings",
+        default=None,
+        metavar="DIR",
+        help="where the Results panel reads the eval's recordings (default recordings/, "
+        "where `l3mvn eval --record` writes); never written to",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -62,25 +103,36 @@ def run(args: argparse.Namespace) -> int:
     A bad flag, host or port, or a port in use, is one line on stderr and status 2, before anything
     is served.
     """
+    from l3mvn.core.config import Config, TaskConfig, override
+    from l3mvn.run.serving import interrupt_on_stop_signals
+    from l3mvn.world.datasets.objectnav import dataset_rule
     from l3mvn_studio.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS
     from l3mvn_studio.server import start_dashboard
     from l3mvn_studio.session_worker import check_speed
-    from l3mvn.core.config import Config, TaskConfig, override
-    from l3mvn.world.datasets.objectnav import dataset_rule
-    from l3mvn.run.serving import interrupt_on_stop_signals
 
     with interrupt_on_stop_signals():
         try:
             check_speed(args.speed)
             # The dataset's own success rule (HM3D / MP3D view points, else SemExp's), as `l3mvn eval` takes it.
             cfg = Config(task=TaskConfig(success_rule=dataset_rule(args.dataset, args.split)))
-            dash = start_dashboard(cfg=override(cfg, args.set), dataset=args.dataset, split=args.split,
-                                   scenes_dir=args.scenes,
-                                   policy=args.policy, host=args.host, port=args.port, houses=args.houses,
-                                   episodes_per_house=args.episodes_per_house, seed=args.seed,
-                                   steps_per_second=args.speed, record=args.record, record_dir=args.record_dir,
-                                   allow_origins=args.allow_origin, results_dir=args.results,
-                                   recordings_dir=args.recordings)
+            dash = start_dashboard(
+                cfg=override(cfg, args.set),
+                dataset=args.dataset,
+                split=args.split,
+                scenes_dir=args.scenes,
+                policy=args.policy,
+                host=args.host,
+                port=args.port,
+                houses=args.houses,
+                episodes_per_house=args.episodes_per_house,
+                seed=args.seed,
+                steps_per_second=args.speed,
+                record=args.record,
+                record_dir=args.record_dir,
+                allow_origins=args.allow_origin,
+                results_dir=args.results,
+                recordings_dir=args.recordings,
+            )
         except L3MVNError as exc:
             print(f"error: {one_line(exc)}", file=sys.stderr)
             return 2
@@ -97,9 +149,11 @@ def _serve_until_stopped(dash, host: str, port: int, allow_flag: str, loopback: 
     after the URL line (a supervisor that starts and stops at once) still stops everything."""
     try:
         if host not in loopback:
-            print(f"warning: serving on {host}: anyone who can reach it can drive the dashboard; "
-                  f"a browser that opens it by another name needs {allow_flag} http://NAME:{port}",
-                  file=sys.stderr)
+            print(
+                f"warning: serving on {host}: anyone who can reach it can drive the dashboard; "
+                f"a browser that opens it by another name needs {allow_flag} http://NAME:{port}",
+                file=sys.stderr,
+            )
         print(f"L3MVN Studio dashboard: {dash.url}  (Ctrl-C to stop)", flush=True)
         while True:
             time.sleep(1.0)

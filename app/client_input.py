@@ -44,11 +44,17 @@ def update_refusal(handle: Any, updates: dict[str, Any]) -> str | None:
     if handle.disabled:
         return f"{label} is disabled right now"
     if isinstance(handle, (viser.GuiDropdownHandle, viser.GuiButtonGroupHandle)):
-        return None if isinstance(value, str) and value in handle.options else (
-            f"{label}: {shown(value)} is not one of the choices; valid: {_choices(handle.options)}")
+        return (
+            None
+            if isinstance(value, str) and value in handle.options
+            else (f"{label}: {shown(value)} is not one of the choices; valid: {_choices(handle.options)}")
+        )
     if isinstance(handle, viser.GuiSliderHandle):
-        return None if _finite(value) and handle.min <= value <= handle.max else (
-            f"{label}: {shown(value)} is not a number from {handle.min:g} to {handle.max:g}")
+        return (
+            None
+            if _finite(value) and handle.min <= value <= handle.max
+            else (f"{label}: {shown(value)} is not a number from {handle.min:g} to {handle.max:g}")
+        )
     if isinstance(handle, viser.GuiCheckboxHandle):
         return None if isinstance(value, bool) else f"{label}: {shown(value)} is not true or false"
     if isinstance(handle, viser.GuiButtonHandle):
@@ -72,8 +78,14 @@ class UpdateGate:
     the server holds again; other tabs see nothing. A check that fails refuses too.
     """
 
-    def __init__(self, server: viser.ViserServer, handles: Iterable[Any], *, busy: Callable[[], str],
-                 tell: Callable[[int, str, str], None]) -> None:
+    def __init__(
+        self,
+        server: viser.ViserServer,
+        handles: Iterable[Any],
+        *,
+        busy: Callable[[], str],
+        tell: Callable[[int, str, str], None],
+    ) -> None:
         """``handles``: the page's controls (anything else in it is skipped); ``busy``: what holds the
         page's controls now, if anything; ``tell(client_id, text, level)``: a notice to one tab."""
         self._server, self._busy, self._tell = server, busy, tell
@@ -82,8 +94,7 @@ class UpdateGate:
     def __call__(self, client_id: int, uuid: str, updates: dict) -> bool:
         handle = self._inputs.get(uuid)
         try:
-            problem = ("that control is not on this page" if handle is None
-                       else update_refusal(handle, updates))
+            problem = "that control is not on this page" if handle is None else update_refusal(handle, updates)
             if problem is None:
                 return True
             busy = self._busy()

@@ -21,7 +21,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from l3mvn_studio.map_image import png_bytes, png_rgb
 from l3mvn.core.config import Config
 from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.run.eval.job import EvalJob
@@ -29,6 +28,7 @@ from l3mvn.run.recording.catalogue import recording_path, unique_tag
 from l3mvn.run.recording.drawing import FONT, PANEL_BG, TEXT_RGB, VideoOptions, fit_text, frames
 from l3mvn.run.recording.recorded import RecordedEpisode, read_episode
 from l3mvn.run.registry import PolicySpec, policies
+from l3mvn_studio.map_image import png_bytes, png_rgb
 
 PICTURE_HEIGHT = 400  # pixels of a side's map panel: the map is what is compared, so it leads
 CAMERA_SCALE = 0.6  # the camera frame under it, at this share of the map panel's height
@@ -136,8 +136,7 @@ class Comparison:
         k = self.first_difference
         if k is None:
             return f"decisions identical for all {self.steps} steps"
-        return (f"decisions first differ at step {k}: A <{_words_at(self.a, k)}>; "
-                f"B <{_words_at(self.b, k)}>")
+        return f"decisions first differ at step {k}: A <{_words_at(self.a, k)}>; B <{_words_at(self.b, k)}>"
 
     def picture(self, step: int) -> np.ndarray:
         """A and B at ``step`` side by side, each captioned; a side that has ended holds its last picture
@@ -147,7 +146,7 @@ class Comparison:
         h = max(p.shape[0] for p in sides)
         out = np.full((h, sides[0].shape[1] + _GAP + sides[1].shape[1], 3), PANEL_BG, np.uint8)
         out[: sides[0].shape[0], : sides[0].shape[1]] = sides[0]
-        out[: sides[1].shape[0], sides[0].shape[1] + _GAP:] = sides[1]
+        out[: sides[1].shape[0], sides[0].shape[1] + _GAP :] = sides[1]
         return out
 
 
@@ -158,6 +157,7 @@ def _words_at(side: Side, step: int) -> str:
 
 
 # --- the first difference --------------------------------------------------------------------
+
 
 def first_difference(a: Sequence[StepDecision], b: Sequence[StepDecision]) -> int | None:
     """The first step at which the two decision lists differ (action, goal kind, chosen frontier or
@@ -177,16 +177,17 @@ def parse_decision(step: int, line: str, goal_xy: np.ndarray | None) -> StepDeci
     """A decision from the recorder's decision line (``Recorder._log_decision``) and the long-term goal
     marker's position that step (``map/goal``, map pixels x = col + 0.5, y = row + 0.5)."""
     m = _DECISION.match(line)
-    cell = None if goal_xy is None or not len(goal_xy) else (math.floor(goal_xy[0][1]),
-                                                              math.floor(goal_xy[0][0]))
+    cell = None if goal_xy is None or not len(goal_xy) else (math.floor(goal_xy[0][1]), math.floor(goal_xy[0][0]))
     if m is None:  # no decision logged this step: only the goal marker can tell the two sides apart
         return StepDecision(step, "", "", None, cell, line)
     frontier = m.group("frontier")
-    return StepDecision(step, m.group("action"), m.group("kind") or "", None if frontier is None else int(frontier),
-                        cell, line)
+    return StepDecision(
+        step, m.group("action"), m.group("kind") or "", None if frontier is None else int(frontier), cell, line
+    )
 
 
 # --- choices and runs --------------------------------------------------------------------------
+
 
 def comparable_policies() -> tuple[str, ...]:
     """Policy names a comparison can run (aliases left out: they would run the same policy twice)."""
@@ -203,8 +204,9 @@ def check_contender(policy: str) -> str:
     if spec is None:
         raise L3MVNError(f"unknown policy {policy!r}; choose one of {', '.join(comparable_policies())}")
     if (why := _excluded(spec)) is not None:
-        raise L3MVNError(f"policy {policy!r} cannot be compared: {why}; choose one of "
-                         f"{', '.join(comparable_policies())}")
+        raise L3MVNError(
+            f"policy {policy!r} cannot be compared: {why}; choose one of {', '.join(comparable_policies())}"
+        )
     return policy
 
 
@@ -228,9 +230,17 @@ def episode_job(source: EpisodeSource, contender: Contender, key: str, record_di
 
 def _job(source: EpisodeSource, contender: Contender, record_dir: str | Path | None) -> EvalJob:
     check_contender(contender.policy)
-    return EvalJob.create(source.dataset, source.split, houses=source.houses,
-                          episodes_per_house=source.episodes_per_house, seed=source.seed, config=contender.config,
-                          policy=contender.policy, record_dir=record_dir, scenes=source.scenes)
+    return EvalJob.create(
+        source.dataset,
+        source.split,
+        houses=source.houses,
+        episodes_per_house=source.episodes_per_house,
+        seed=source.seed,
+        config=contender.config,
+        policy=contender.policy,
+        record_dir=record_dir,
+        scenes=source.scenes,
+    )
 
 
 def side_folder(record_dir: str | Path, config_hash: str) -> Path:
@@ -253,8 +263,14 @@ def run_side(source: EpisodeSource, key: str, contender: Contender, record_dir: 
     return found
 
 
-def run_comparison(source: EpisodeSource, key: str, a: Contender, b: Contender, record_dir: str | Path,
-                   progress: Callable[[str], None] = lambda text: None) -> Comparison:
+def run_comparison(
+    source: EpisodeSource,
+    key: str,
+    a: Contender,
+    b: Contender,
+    record_dir: str | Path,
+    progress: Callable[[str], None] = lambda text: None,
+) -> Comparison:
     """Run ``key`` with A, then with B (same episode, same seed), and compare their recordings."""
     for c in (a, b):
         check_contender(c.policy)
@@ -262,8 +278,9 @@ def run_comparison(source: EpisodeSource, key: str, a: Contender, b: Contender, 
         return _run_both(source, key, a, b, record_dir, progress)
 
 
-def _run_both(source: EpisodeSource, key: str, a: Contender, b: Contender, record_dir: str | Path,
-              progress: Callable[[str], None]) -> Comparison:
+def _run_both(
+    source: EpisodeSource, key: str, a: Contender, b: Contender, record_dir: str | Path, progress: Callable[[str], None]
+) -> Comparison:
     progress(f"running A ({a.policy}) on {key}")
     path_a = run_side(source, key, a, record_dir)
     progress(f"running B ({b.policy}) on {key}")
@@ -276,8 +293,10 @@ def compare_recordings(path_a: str | Path, path_b: str | Path, key: str) -> Comp
     """The comparison of two recordings of one episode (one-line L3MVNError for a bad recording)."""
     ep_a, ep_b = read_episode(path_a), read_episode(path_b)
     if (ep_a.scene, ep_a.episode_id) != (ep_b.scene, ep_b.episode_id):
-        raise L3MVNError(f"{Path(path_a).name} and {Path(path_b).name} record different episodes "
-                         f"({ep_a.scene} #{ep_a.episode_id} vs {ep_b.scene} #{ep_b.episode_id})")
+        raise L3MVNError(
+            f"{Path(path_a).name} and {Path(path_b).name} record different episodes "
+            f"({ep_a.scene} #{ep_a.episode_id} vs {ep_b.scene} #{ep_b.episode_id})"
+        )
     _share_crop(ep_a, ep_b)
     a, b = _side("A", ep_a), _side("B", ep_b)
     goal = ep_a.steps[0].goal if ep_a.steps else "?"
@@ -288,8 +307,9 @@ def _share_crop(ep_a: RecordedEpisode, ep_b: RecordedEpisode) -> None:
     """Both maps cut to one crop (the union of each side's), so a cell lies at the same place in both
     pictures and one scale reads both; only when both maps share a frame (the agent starts on the same
     map pixel at its first mapped step: same episode, same map size), else each keeps its own."""
-    starts = [next((tuple(np.round(s.agent[0], 3)) for s in ep.steps if s.agent is not None), None)
-              for ep in (ep_a, ep_b)]
+    starts = [
+        next((tuple(np.round(s.agent[0], 3)) for s in ep.steps if s.agent is not None), None) for ep in (ep_a, ep_b)
+    ]
     if starts[0] is None or starts[0] != starts[1]:
         return
     (r0, r1, c0, c1), (s0, s1, d0, d1) = ep_a.box, ep_b.box
@@ -300,8 +320,10 @@ def _side(letter: str, ep: RecordedEpisode) -> Side:
     options = VideoOptions(height=PICTURE_HEIGHT, title_s=0.0)
     h0, w0 = cv2.imdecode(np.frombuffer(ep.steps[0].rgb_png, np.uint8), cv2.IMREAD_UNCHANGED).shape[:2]
     camera_w = round(PICTURE_HEIGHT * w0 / h0)
-    decisions = tuple(parse_decision(s.step, s.decision or "(no decision logged)",
-                                     None if s.goal_mark is None else s.goal_mark.xy) for s in ep.steps)
+    decisions = tuple(
+        parse_decision(s.step, s.decision or "(no decision logged)", None if s.goal_mark is None else s.goal_mark.xy)
+        for s in ep.steps
+    )
     label = f"{letter}: {ep.policy}"
     pictures = []
     for frame, d in zip(frames(ep, options, title_frames=0), decisions):
@@ -313,13 +335,13 @@ def _restack(frame: np.ndarray, camera_w: int, d: StepDecision, last: int) -> np
     """The export frame (camera | map, text band) as one side of a comparison: the map on top at full
     size, the camera under it smaller, then the step and the decision in large type."""
     h = PICTURE_HEIGHT
-    camera, map_panel = frame[:h, :camera_w], frame[:h, camera_w + 6:]
+    camera, map_panel = frame[:h, :camera_w], frame[:h, camera_w + 6 :]
     ch, cw = round(h * CAMERA_SCALE), round(camera_w * CAMERA_SCALE)
     small = cv2.resize(camera, (cw, ch), interpolation=cv2.INTER_AREA)
     width = max(map_panel.shape[1], cw)
     out = np.full((h + 4 + ch + _BAND, width, 3), PANEL_BG, np.uint8)
-    out[:h, :map_panel.shape[1]] = map_panel
-    out[h + 4: h + 4 + ch, :cw] = small
+    out[:h, : map_panel.shape[1]] = map_panel
+    out[h + 4 : h + 4 + ch, :cw] = small
     y = h + 4 + ch
     cv2.putText(out, f"step {d.step}/{last}", (8, y + 24), FONT, 0.65, TEXT_RGB, 1, cv2.LINE_AA)
     for i, line in enumerate(_wrap(d.line, width - 16, 0.5)[:2]):
@@ -335,8 +357,9 @@ def _captioned(side: Side, step: int, differs: bool) -> np.ndarray:
     if step > side.last_step:
         text = f"ended at step {side.last_step} ({_outcome_word(side)})"
         cv2.rectangle(out, (0, _CAPTION), (out.shape[1] - 1, _CAPTION + 44), _ENDED_RGB, -1)
-        cv2.putText(out, fit_text(text, out.shape[1] - 16, 0.7), (8, _CAPTION + 30), FONT, 0.7, (255, 255, 255), 2,
-                    cv2.LINE_AA)
+        cv2.putText(
+            out, fit_text(text, out.shape[1] - 16, 0.7), (8, _CAPTION + 30), FONT, 0.7, (255, 255, 255), 2, cv2.LINE_AA
+        )
     elif differs:
         cv2.rectangle(out, (1, 1), (out.shape[1] - 2, out.shape[0] - 2), _DIFF_RGB, 3)
         tw = cv2.getTextSize("first difference", FONT, 0.6, 2)[0][0]

@@ -20,22 +20,22 @@ from pathlib import Path
 import numpy as np
 import viser
 
+from l3mvn.core.config import Config
+from l3mvn.core.errors import L3MVNError, first_line
+from l3mvn.world.episode import Episode
 from l3mvn_studio.compare import (
     Comparison,
     Contender,
     EpisodeSource,
     comparable_policies,
-    excluded_policies,
     compare_recordings,
+    excluded_policies,
     run_comparison,
     side_folder,
 )
 from l3mvn_studio.map_image import png_bytes
 from l3mvn_studio.page_text import html, md
 from l3mvn_studio.results import EpisodeRow, recording_of, rerun
-from l3mvn.core.config import Config
-from l3mvn.core.errors import L3MVNError, first_line
-from l3mvn.world.episode import Episode
 
 log = logging.getLogger(__name__)
 
@@ -45,28 +45,42 @@ NO_PICTURE = ""  # until a comparison exists
 _ORDER = itertools.count(1)  # overlays opened later lie on top of earlier ones
 
 
-def main_view_html(rgb: np.ndarray, title: str, *, main_view: bool,
-                   note: str = 'untick "Show in main view" for the live map') -> str:
+def main_view_html(
+    rgb: np.ndarray, title: str, *, main_view: bool, note: str = 'untick "Show in main view" for the live map'
+) -> str:
     """``rgb`` as a PNG in the page (lossless: the page receives exactly these pixels): over the main
     view (left of the control panel, scaled to fill it, under a title bar), or in the panel at its width."""
     src = "data:image/png;base64," + base64.b64encode(png_bytes(rgb)).decode("ascii")
     img = f"<img class='l3mvn-picture' alt='{html(title)}' src='{src}' style='max-width:100%;max-height:100%;"
     if not main_view:
         return f"<div>{img}display:block'></div>"
-    head = (f"<div style='color:#eee;font:600 14px sans-serif;padding:6px 10px'>{html(title)} "
-            f"<span style='font-weight:400;color:#aaa'>({html(note)})</span></div>")
-    return (f"<div class='l3mvn-main-view' style='position:fixed;left:0;top:0;bottom:0;"
-            f"width:calc(100vw - 440px);z-index:{10 + next(_ORDER)};background:#181818;display:flex;"
-            f"flex-direction:column'>{head}<div style='flex:1;min-height:0;display:flex;align-items:center;"
-            f"justify-content:center;padding:4px'>{img}width:100%;height:100%;object-fit:contain'></div></div>")
+    head = (
+        f"<div style='color:#eee;font:600 14px sans-serif;padding:6px 10px'>{html(title)} "
+        f"<span style='font-weight:400;color:#aaa'>({html(note)})</span></div>"
+    )
+    return (
+        f"<div class='l3mvn-main-view' style='position:fixed;left:0;top:0;bottom:0;"
+        f"width:calc(100vw - 440px);z-index:{10 + next(_ORDER)};background:#181818;display:flex;"
+        f"flex-direction:column'>{head}<div style='flex:1;min-height:0;display:flex;align-items:center;"
+        f"justify-content:center;padding:4px'>{img}width:100%;height:100%;object-fit:contain'></div></div>"
+    )
 
 
 class ComparePanel:
     """Builds the Compare folder and answers its controls (one state shared by every tab)."""
 
-    def __init__(self, gui: viser.GuiApi, source: EpisodeSource, *, config: Config, record_dir: str | Path,
-                 current_policy: str, selected_episode: Callable[[], Episode], on: Callable,
-                 tell: Callable) -> None:
+    def __init__(
+        self,
+        gui: viser.GuiApi,
+        source: EpisodeSource,
+        *,
+        config: Config,
+        record_dir: str | Path,
+        current_policy: str,
+        selected_episode: Callable[[], Episode],
+        on: Callable,
+        tell: Callable,
+    ) -> None:
         self.source, self.config, self.record_dir = source, config, Path(record_dir)
         self._selected_episode, self._tell = selected_episode, tell
         self._lock = threading.Lock()
@@ -76,14 +90,17 @@ class ComparePanel:
         first = current_policy if current_policy in choices else FALLBACK_A
         excluded = "; ".join(f"`{p}` ({why})" for p, why in excluded_policies().items())
         with gui.add_folder("Compare", expand_by_default=False):
-            gui.add_markdown("Two policies on the episode selected in **Episode**, step by step, "
-                             f"run as `l3mvn eval` runs them (same seed). Not offered: {excluded}.")
+            gui.add_markdown(
+                "Two policies on the episode selected in **Episode**, step by step, "
+                f"run as `l3mvn eval` runs them (same seed). Not offered: {excluded}."
+            )
             self.policy_a = gui.add_dropdown("Policy A", choices, initial_value=first)
             self.policy_b = gui.add_dropdown("Policy B", choices, initial_value=DEFAULT_B)
             self.run = gui.add_button("Run both")
             self.status = gui.add_markdown("")
-            self.main_view = gui.add_checkbox("Show in main view", True,
-                                              hint="draw the comparison over the live map; untick for the map")
+            self.main_view = gui.add_checkbox(
+                "Show in main view", True, hint="draw the comparison over the live map; untick for the map"
+            )
             self.step = gui.add_slider("Compare step", min=0, max=1, step=1, initial_value=0, disabled=True)
             self.jump = gui.add_button("Jump to first difference", disabled=True)
             self.difference = gui.add_markdown("")
@@ -114,8 +131,11 @@ class ComparePanel:
             episode = self._selected_episode()
             a = Contender(self.policy_a.value, self.config)
             b = Contender(self.policy_b.value, self.config)
-            self._start(f"{episode.key}: A {a.policy} vs B {b.policy}", event.client_id,
-                        lambda progress: run_comparison(self.source, episode.key, a, b, self.record_dir, progress))
+            self._start(
+                f"{episode.key}: A {a.policy} vs B {b.policy}",
+                event.client_id,
+                lambda progress: run_comparison(self.source, episode.key, a, b, self.record_dir, progress),
+            )
 
         @on(self.step)
         def _(event) -> None:
@@ -125,7 +145,9 @@ class ComparePanel:
         def _(event) -> None:
             c = self.comparison
             if c is None or c.first_difference is None:
-                raise L3MVNError("no step to jump to: " + ("run a comparison first" if c is None else c.difference_line))
+                raise L3MVNError(
+                    "no step to jump to: " + ("run a comparison first" if c is None else c.difference_line)
+                )
             self.step.value = c.first_difference
             self.show(c.first_difference)
 
@@ -137,14 +159,19 @@ class ComparePanel:
         """Compare the episode of two result lines: their recordings when both exist (and can be told
         apart: different policies), else each line re-run with its stored config and policy."""
         if a.raw.get("key") != b.raw.get("key"):
-            raise L3MVNError(f"lines {a.index} and {b.index} are different episodes ({a.raw.get('key')} vs "
-                             f"{b.raw.get('key')})")
+            raise L3MVNError(
+                f"lines {a.index} and {b.index} are different episodes ({a.raw.get('key')} vs {b.raw.get('key')})"
+            )
         key = str(a.raw["key"])
-        self._start(f"{key}: A line {a.index} ({a.policy}) vs B line {b.index} ({b.policy})", client_id,
-                    lambda progress: self._compare_rows(a, b, recordings_dir, progress))
+        self._start(
+            f"{key}: A line {a.index} ({a.policy}) vs B line {b.index} ({b.policy})",
+            client_id,
+            lambda progress: self._compare_rows(a, b, recordings_dir, progress),
+        )
 
-    def _compare_rows(self, a: EpisodeRow, b: EpisodeRow, recordings_dir: Path,
-                      progress: Callable[[str], None]) -> Comparison:
+    def _compare_rows(
+        self, a: EpisodeRow, b: EpisodeRow, recordings_dir: Path, progress: Callable[[str], None]
+    ) -> Comparison:
         stored = [recording_of(recordings_dir, r) for r in (a, b)]
         if a.policy != b.policy and all(stored):
             progress("reading both recordings")
@@ -154,8 +181,15 @@ class ComparePanel:
             progress(f"re-running {letter} (line {row.index}, {row.policy}) with its stored config")
             folder = side_folder(self.record_dir, str(row.raw.get("config_hash", "stored")))
             s = self.source
-            done = rerun(row.raw, dataset=s.dataset, split=s.split, houses=s.houses,
-                         episodes_per_house=s.episodes_per_house, seed=s.seed, record_dir=folder)
+            done = rerun(
+                row.raw,
+                dataset=s.dataset,
+                split=s.split,
+                houses=s.houses,
+                episodes_per_house=s.episodes_per_house,
+                seed=s.seed,
+                record_dir=folder,
+            )
             paths.append(done.recording)
             log.info("compare: %s", done.summary)
         progress("reading both recordings")
@@ -166,8 +200,9 @@ class ComparePanel:
         with self._lock:
             if self.busy:
                 raise L3MVNError(f"a comparison is running ({self.status.content.strip('*_ ')}): wait for it")
-            self._thread = threading.Thread(target=self._run, args=(what, client_id, work),
-                                            name="l3mvn-compare", daemon=True)
+            self._thread = threading.Thread(
+                target=self._run, args=(what, client_id, work), name="l3mvn-compare", daemon=True
+            )
             self._hold(True, f"**Working**: {what}")
             self._thread.start()
 
@@ -183,10 +218,15 @@ class ComparePanel:
             self._done(None, f"_comparison failed: {type(exc).__name__}_")
             self._tell(client_id, f"compare failed: {type(exc).__name__}: {first_line(exc)}", "error")
             return
-        self._done(comparison, f"{comparison.episode_key}, find **{comparison.goal}**: A {comparison.a.result}; "
-                               f"B {comparison.b.result}")
-        self._tell(client_id, f"compared {comparison.episode_key}: {comparison.difference_line} (step through both "
-                              "in the Compare folder)")
+        self._done(
+            comparison,
+            f"{comparison.episode_key}, find **{comparison.goal}**: A {comparison.a.result}; B {comparison.b.result}",
+        )
+        self._tell(
+            client_id,
+            f"compared {comparison.episode_key}: {comparison.difference_line} (step through both "
+            "in the Compare folder)",
+        )
 
     def _done(self, comparison: Comparison | None, status: str) -> None:
         with self._lock:

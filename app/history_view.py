@@ -17,11 +17,11 @@ import cv2
 import numpy as np
 import viser
 
+from l3mvn.core.errors import L3MVNError
 from l3mvn_studio.compare_view import main_view_html
 from l3mvn_studio.map_image import png_bytes, png_rgb, score_color
 from l3mvn_studio.page_text import md
 from l3mvn_studio.state import MapView, Snapshot
-from l3mvn.core.errors import L3MVNError
 
 MAX_KEPT = 2000  # steps of one episode kept (~30 KB each); an episode is 500 by default
 _AGENT = (220, 40, 40)
@@ -74,8 +74,10 @@ class HistoryPanel:
     def picture_at(self, step: int) -> np.ndarray:
         with self._lock:
             if step not in self._pictures:
-                raise L3MVNError(f"step {step} is not in this episode's history; valid: "
-                                 f"{min(self._pictures, default=0)}..{max(self._pictures, default=0)}")
+                raise L3MVNError(
+                    f"step {step} is not in this episode's history; valid: "
+                    f"{min(self._pictures, default=0)}..{max(self._pictures, default=0)}"
+                )
             return png_rgb(self._pictures[step])
 
     def close(self) -> None:
@@ -105,8 +107,12 @@ class HistoryPanel:
         picture = self.picture_at(step)
         with self._lock:
             line = self._lines[step]
-        self.picture.content = main_view_html(picture, f"Looking back: {line[:120]}", main_view=True,
-                                              note="press Back to live in Episode history for the live map")
+        self.picture.content = main_view_html(
+            picture,
+            f"Looking back: {line[:120]}",
+            main_view=True,
+            note="press Back to live in Episode history for the live map",
+        )
         self.line.content = md(line)
         self.live.disabled = False
 
@@ -163,10 +169,26 @@ def history_picture(view: MapView) -> np.ndarray:
         score = f.fused if f.fused is not None else f.s_cu
         cv2.circle(img, px(f.cell), r, score_color(score), -1, cv2.LINE_AA)
         cv2.circle(img, px(f.cell), r + 3 if f.chosen else r, (0, 0, 0), 2 if f.chosen else 1, cv2.LINE_AA)
-        cv2.putText(img, f"F{f.id}", (px(f.cell)[0] + r + 2, px(f.cell)[1] + 4), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
-                    (255, 255, 255), 2, cv2.LINE_AA)
-        cv2.putText(img, f"F{f.id}", (px(f.cell)[0] + r + 2, px(f.cell)[1] + 4), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
-                    (0, 0, 0), 1, cv2.LINE_AA)
+        cv2.putText(
+            img,
+            f"F{f.id}",
+            (px(f.cell)[0] + r + 2, px(f.cell)[1] + 4),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.45,
+            (255, 255, 255),
+            2,
+            cv2.LINE_AA,
+        )
+        cv2.putText(
+            img,
+            f"F{f.id}",
+            (px(f.cell)[0] + r + 2, px(f.cell)[1] + 4),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.45,
+            (0, 0, 0),
+            1,
+            cv2.LINE_AA,
+        )
     if view.long_term_goal is not None:
         cv2.drawMarker(img, px(view.long_term_goal), _GOAL, cv2.MARKER_CROSS, 3 * r, 3, cv2.LINE_AA)
     x, y = px(view.agent_cell)

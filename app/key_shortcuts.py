@@ -8,8 +8,10 @@ The labels here are the ones the view gives its buttons.
 from __future__ import annotations
 
 SHORTCUTS_MD = "Keys: `Space` run / pause, `N` step, `R` reset, `F` fit map (not while typing in a field)"
-DRIVE_MD = ("Keys: `W` / `Up` forward, `A` / `Left` and `D` / `Right` turn, `Q` look up, `E` look down, "
-            "`X` stop (ends the episode; it is scored like any policy's)")
+DRIVE_MD = (
+    "Keys: `W` / `Up` forward, `A` / `Left` and `D` / `Right` turn, `Q` look up, `E` look down, "
+    "`X` stop (ends the episode; it is scored like any policy's)"
+)
 # Pressed keys click the page's own buttons, so a shortcut goes through the same checks as a click.
 SHORTCUTS_JS = """
 if (!window.__l3mvnShortcuts) {

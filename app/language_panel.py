@@ -9,11 +9,11 @@ the view only assigns the string.
 
 from __future__ import annotations
 
-from l3mvn_studio.page_text import html
-from l3mvn_studio.state import FrontierMarker, MapView
 from l3mvn.agent.frontiers import Fusion
 from l3mvn.run.registry import language_policies, reads_language
 from l3mvn.run.viz import category_color
+from l3mvn_studio.page_text import html
+from l3mvn_studio.state import FrontierMarker, MapView
 
 SHOWN_FRONTIERS = 4  # the chosen frontier and the best others by fused score
 BAR_PX = 130  # the width of p = 1
@@ -29,26 +29,34 @@ def language_html(view: MapView | None, policy: str, *, shown: int = SHOWN_FRONT
     one card per shown frontier (chosen first)."""
     if not uses_language(policy):
         names = ", ".join(language_policies())
-        return _note(f"Policy <b>{html(policy)}</b> uses no language: it chooses its goals without a language "
-                     f"model. Pick a language policy ({html(names)}) and press Reset to see its scores here.")
+        return _note(
+            f"Policy <b>{html(policy)}</b> uses no language: it chooses its goals without a language "
+            f"model. Pick a language policy ({html(names)}) and press Reset to see its scores here."
+        )
     if view is None or view.fusion is None or not view.frontiers:
-        return _note(f"Policy <b>{html(policy)}</b> scores frontiers with a language model: its scores appear "
-                     "here when the agent first chooses a frontier (after the look-around).")
+        return _note(
+            f"Policy <b>{html(policy)}</b> scores frontiers with a language model: its scores appear "
+            "here when the agent first chooses a frontier (after the look-around)."
+        )
     cards = "".join(frontier_card_html(f, view.target) for f in shown_frontiers(view.frontiers, view.fusion, shown))
-    return (f'<div style="font-size:12px;line-height:1.35">{fusion_html(view.fusion, view.frontiers, view.goal_kind)}'
-            f"{_key(view)}{cards}</div>")
+    return (
+        f'<div style="font-size:12px;line-height:1.35">{fusion_html(view.fusion, view.frontiers, view.goal_kind)}'
+        f"{_key(view)}{cards}</div>"
+    )
 
 
-def shown_frontiers(frontiers: tuple[FrontierMarker, ...], fusion: Fusion | None,
-                    shown: int = SHOWN_FRONTIERS) -> list[FrontierMarker]:
+def shown_frontiers(
+    frontiers: tuple[FrontierMarker, ...], fusion: Fusion | None, shown: int = SHOWN_FRONTIERS
+) -> list[FrontierMarker]:
     """The chosen frontier, then the rule's pick (when commitment kept another), then the best
     others by fused score; at most ``shown``, never fewer than those first two."""
     pick = None if fusion is None else fusion.ids[fusion.choice]
     first = [f for f in frontiers if f.chosen] + [f for f in frontiers if f.id == pick and not f.chosen]
     taken = {f.id for f in first}
-    rest = sorted((f for f in frontiers if f.id not in taken),
-                  key=lambda f: -(f.fused if f.fused is not None else f.s_cu))
-    return first + rest[:max(0, shown - len(first))]
+    rest = sorted(
+        (f for f in frontiers if f.id not in taken), key=lambda f: -(f.fused if f.fused is not None else f.s_cu)
+    )
+    return first + rest[: max(0, shown - len(first))]
 
 
 def fusion_html(fusion: Fusion, frontiers: tuple[FrontierMarker, ...], goal_kind: str = "") -> str:
@@ -56,11 +64,15 @@ def fusion_html(fusion: Fusion, frontiers: tuple[FrontierMarker, ...], goal_kind
     differs from the rule's pick where it does (commitment, or a goal that is not a frontier)."""
     pick = fusion.ids[fusion.choice]
     chosen = next((f.id for f in frontiers if f.chosen), None)
-    lines = [f"<b>Fusion rule</b> (<code>{html(fusion.rule)}</code>, branch <i>{html(fusion.branch)}</i>): "
-             f"{html(fusion.describe())}"]
+    lines = [
+        f"<b>Fusion rule</b> (<code>{html(fusion.rule)}</code>, branch <i>{html(fusion.branch)}</i>): "
+        f"{html(fusion.describe())}"
+    ]
     if chosen is not None and chosen != pick:
-        lines.append(f"The rule picked F{pick}; the agent keeps F{chosen}, the frontier it already pursues "
-                     f"(F{pick} is not better by the commitment margin).")
+        lines.append(
+            f"The rule picked F{pick}; the agent keeps F{chosen}, the frontier it already pursues "
+            f"(F{pick} is not better by the commitment margin)."
+        )
     elif chosen is None:
         kind = html(goal_kind or "none")
         lines.append(f"The goal now is not a frontier ({kind}); these are the scores of the last frontier choice.")
@@ -69,19 +81,23 @@ def fusion_html(fusion: Fusion, frontiers: tuple[FrontierMarker, ...], goal_kind
 
 def frontier_card_html(f: FrontierMarker, target: str) -> str:
     """One frontier: its scores, objects and query, then a bar per goal (target ringed and first)."""
-    head = (f"<b>{'★ ' if f.chosen else ''}F{f.id}</b>{' (chosen)' if f.chosen else ''} &middot; "
-            f"S_LLM {_num(f.s_llm)} &middot; S_CU {f.s_cu:.2f} &middot; fused {_num(f.fused)} &middot; "
-            f"{f.distance_m:.1f} m away")
+    head = (
+        f"<b>{'★ ' if f.chosen else ''}F{f.id}</b>{' (chosen)' if f.chosen else ''} &middot; "
+        f"S_LLM {_num(f.s_llm)} &middot; S_CU {f.s_cu:.2f} &middot; fused {_num(f.fused)} &middot; "
+        f"{f.distance_m:.1f} m away"
+    )
     objects = html(", ".join(f.objects)) or "none"
     query = query_of(f, target)
     goals = sorted(f.llm_scores, key=lambda g: g != target)
     bars = "".join(bar_html(g, f.llm_scores[g], target=g == target, metres=f.expected_m.get(g)) for g in goals)
     border = "2px solid #333" if f.chosen else "1px solid #ccc"
-    return (f'<div style="border:{border};border-radius:4px;padding:4px 6px;margin:6px 0">'
-            f"<div>{head}</div>"
-            f'<div style="color:{_MUTED}">objects: {objects}</div>'
-            f'<div style="margin:2px 0"><i>{html(query) if query else "no query: no informative object"}</i></div>'
-            f"{bars or _note('no per-goal scores')}</div>")
+    return (
+        f'<div style="border:{border};border-radius:4px;padding:4px 6px;margin:6px 0">'
+        f"<div>{head}</div>"
+        f'<div style="color:{_MUTED}">objects: {objects}</div>'
+        f'<div style="margin:2px 0"><i>{html(query) if query else "no query: no informative object"}</i></div>'
+        f"{bars or _note('no per-goal scores')}</div>"
+    )
 
 
 def bar_html(goal: str, p: float, *, target: bool, metres: float | None = None) -> str:
@@ -91,12 +107,14 @@ def bar_html(goal: str, p: float, *, target: bool, metres: float | None = None) 
     name = f"<b>{html(goal)} (target)</b>" if target else html(goal)
     ring = "outline:2px solid #000;outline-offset:1px;" if target else ""
     tail = "" if metres is None else f' <span style="color:{_MUTED}">{metres:.1f} m</span>'
-    return (f'<div style="display:flex;align-items:center;gap:6px;margin:1px 0">'
-            f'<span style="width:118px;flex:none;overflow:hidden;white-space:nowrap">{name}</span>'
-            f'<span style="width:{BAR_PX}px;flex:none;background:#eee;height:10px;display:inline-block">'
-            f'<span data-goal="{html(goal)}" style="display:block;height:10px;width:{width:.1f}px;background:{rgb};'
-            f'{ring}"></span></span>'
-            f"<span>{p:.2f}{tail}</span></div>")
+    return (
+        f'<div style="display:flex;align-items:center;gap:6px;margin:1px 0">'
+        f'<span style="width:118px;flex:none;overflow:hidden;white-space:nowrap">{name}</span>'
+        f'<span style="width:{BAR_PX}px;flex:none;background:#eee;height:10px;display:inline-block">'
+        f'<span data-goal="{html(goal)}" style="display:block;height:10px;width:{width:.1f}px;background:{rgb};'
+        f'{ring}"></span></span>'
+        f"<span>{p:.2f}{tail}</span></div>"
+    )
 
 
 def query_of(f: FrontierMarker, target: str) -> str:
@@ -107,8 +125,10 @@ def query_of(f: FrontierMarker, target: str) -> str:
 
 def _key(view: MapView) -> str:
     metres = any(f.expected_m for f in view.frontiers)
-    text = ("Bars: the scorer's p(goal | frontier) for every goal, the target ringed; S_LLM is the target's "
-            "score as the rule reads it")
+    text = (
+        "Bars: the scorer's p(goal | frontier) for every goal, the target ringed; S_LLM is the target's "
+        "score as the rule reads it"
+    )
     if metres:
         text += "; metres: the head's expected distance from the frontier to each goal"
     return f'<div style="color:{_MUTED};margin-bottom:2px">{text}.</div>'

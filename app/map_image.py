@@ -12,11 +12,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from l3mvn_studio.state import Cell, FrontierMarker, MapView
 from l3mvn.agent.decision import Decision
-from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.core.types import Pose
 from l3mvn.run.viz import COLLISION_RGB, category_palette, legend
+from l3mvn.world.scenes.scene import SceneMap
+from l3mvn_studio.state import Cell, FrontierMarker, MapView
 
 UNEXPLORED = (28, 30, 36)
 FREE = (226, 226, 220)
@@ -58,18 +58,29 @@ def agent_map_view(decision: Decision, target: str = "") -> MapView:
     scale = _scale(img.shape)
     half = m.size // 2
     return MapView(
-        image=_upscale(img, scale), origin=(r0, c0), scale=scale, grid_shape=(m.size, m.size),
+        image=_upscale(img, scale),
+        origin=(r0, c0),
+        scale=scale,
+        grid_shape=(m.size, m.size),
         world_origin=(m.start_xy[0] + (0.5 - half) * m.resolution_m, m.start_xy[1] + (0.5 - half) * m.resolution_m),
-        resolution_m=m.resolution_m, source="agent map", agent_cell=tuple(m.agent_cell),
-        agent_heading=m.agent_heading, long_term_goal=_cell(decision.long_term_goal),
-        short_term_goal=_cell(decision.short_term_goal), goal_kind=decision.goal_kind,
-        override=decision.override, frontiers=frontiers, legend=tuple(legend(shown)), target=target,
+        resolution_m=m.resolution_m,
+        source="agent map",
+        agent_cell=tuple(m.agent_cell),
+        agent_heading=m.agent_heading,
+        long_term_goal=_cell(decision.long_term_goal),
+        short_term_goal=_cell(decision.short_term_goal),
+        goal_kind=decision.goal_kind,
+        override=decision.override,
+        frontiers=frontiers,
+        legend=tuple(legend(shown)),
+        target=target,
         fusion=decision.frontiers[0].fusion if decision.frontiers else None,
     )
 
 
-def ground_truth_view(scene: SceneMap, trajectory: list[Pose], decision: Decision | None = None,
-                      target: str = "") -> MapView:
+def ground_truth_view(
+    scene: SceneMap, trajectory: list[Pose], decision: Decision | None = None, target: str = ""
+) -> MapView:
     """The scene's ground-truth floor plan with the walked path: for policies without a map."""
     h, w = scene.shape
     img = np.empty((h, w, 3), np.uint8)
@@ -82,11 +93,19 @@ def ground_truth_view(scene: SceneMap, trajectory: list[Pose], decision: Decisio
     pose = trajectory[-1]
     scale = _scale(img.shape)
     return MapView(
-        image=_upscale(img, scale), origin=(0, 0), scale=scale, grid_shape=(h, w),
+        image=_upscale(img, scale),
+        origin=(0, 0),
+        scale=scale,
+        grid_shape=(h, w),
         world_origin=(0.5 * scene.resolution_m, 0.5 * scene.resolution_m),
-        resolution_m=scene.resolution_m, source="ground truth", agent_cell=scene.cell_of(pose.x, pose.y),
-        agent_heading=pose.heading, goal_kind=decision.goal_kind if decision else "",
-        override=decision.override if decision else None, legend=tuple(legend(shown)), target=target,
+        resolution_m=scene.resolution_m,
+        source="ground truth",
+        agent_cell=scene.cell_of(pose.x, pose.y),
+        agent_heading=pose.heading,
+        goal_kind=decision.goal_kind if decision else "",
+        override=decision.override if decision else None,
+        legend=tuple(legend(shown)),
+        target=target,
     )
 
 
@@ -160,11 +179,19 @@ _VIRIDIS = ((68, 1, 84), (59, 82, 139), (33, 145, 140), (94, 201, 98), (253, 231
 def _marker(f, chosen: bool) -> FrontierMarker:
     """``Decision.chosen_frontier`` is an index into ``Decision.frontiers``."""
     return FrontierMarker(
-        id=int(f.id), cell=(int(f.center[0]), int(f.center[1])), size=int(f.size),
-        distance_m=float(f.distance_m), s_cu=float(f.s_cu),
-        s_llm=None if f.s_llm is None else float(f.s_llm), fused=None if f.fused is None else float(f.fused),
-        objects=tuple(f.objects), queries=dict(f.queries), reason=f.reason, chosen=chosen,
-        llm_scores=dict(f.llm_scores), expected_m=dict(f.expected_m),
+        id=int(f.id),
+        cell=(int(f.center[0]), int(f.center[1])),
+        size=int(f.size),
+        distance_m=float(f.distance_m),
+        s_cu=float(f.s_cu),
+        s_llm=None if f.s_llm is None else float(f.s_llm),
+        fused=None if f.fused is None else float(f.fused),
+        objects=tuple(f.objects),
+        queries=dict(f.queries),
+        reason=f.reason,
+        chosen=chosen,
+        llm_scores=dict(f.llm_scores),
+        expected_m=dict(f.expected_m),
     )
 
 

@@ -10,10 +10,10 @@ from __future__ import annotations
 import inspect
 from pathlib import Path
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.language import scorer_names
 from l3mvn.agent.language.models import resolve
 from l3mvn.agent.language.scorers import Scorer
+from l3mvn.core.errors import L3MVNError
 
 
 def scorer_problems() -> dict[str, str]:

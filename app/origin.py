@@ -20,11 +20,11 @@ from __future__ import annotations
 import logging
 import re
 import threading
-from typing import Iterable
+from collections.abc import Iterable
 from urllib.parse import urlsplit
 
-from l3mvn_studio.client_input import shown
 from l3mvn.core.errors import L3MVNError
+from l3mvn_studio.client_input import shown
 
 log = logging.getLogger(__name__)
 
@@ -43,10 +43,19 @@ def normalize_origin(text: str) -> str:
     except ValueError as exc:
         raise L3MVNError(f"{ALLOW_ORIGIN_FLAG} {text!r}: {exc}") from None
     scheme = parts.scheme.lower()
-    if scheme not in _DEFAULT_PORTS or not _HOSTNAME.fullmatch(parts.hostname or "") or parts.username \
-            or parts.password or parts.path not in ("", "/") or parts.query or parts.fragment:
-        raise L3MVNError(f"{ALLOW_ORIGIN_FLAG} {text!r} is not an origin; give scheme://host[:port], "
-                         "e.g. https://studio.example.com or http://192.168.1.5:8080")
+    if (
+        scheme not in _DEFAULT_PORTS
+        or not _HOSTNAME.fullmatch(parts.hostname or "")
+        or parts.username
+        or parts.password
+        or parts.path not in ("", "/")
+        or parts.query
+        or parts.fragment
+    ):
+        raise L3MVNError(
+            f"{ALLOW_ORIGIN_FLAG} {text!r} is not an origin; give scheme://host[:port], "
+            "e.g. https://studio.example.com or http://192.168.1.5:8080"
+        )
     return f"{scheme}://{_authority(parts.hostname, port, _DEFAULT_PORTS[scheme])}"
 
 
@@ -80,13 +89,17 @@ class OriginPolicy:
         if len(hosts) != 1:
             return f"refused a request with {len(hosts)} Host headers (exactly one is required)"
         if _canonical_host(hosts[0]) not in self.host_headers(port):
-            return (f"refused a request for Host {shown(hosts[0])}: this dashboard answers to "
-                    f"{', '.join(self.host_headers(port))}{_allow_hint('http://' + hosts[0])}")
+            return (
+                f"refused a request for Host {shown(hosts[0])}: this dashboard answers to "
+                f"{', '.join(self.host_headers(port))}{_allow_hint('http://' + hosts[0])}"
+            )
         if len(origins) > 1:
             return f"refused a request with {len(origins)} Origin headers (at most one is allowed)"
         if origins and origins[0] not in self.origins(port):
-            return (f"refused a connection from a page at Origin {shown(origins[0])}: allowed are "
-                    f"{', '.join(self.origins(port))}{_allow_hint(origins[0])}")
+            return (
+                f"refused a connection from a page at Origin {shown(origins[0])}: allowed are "
+                f"{', '.join(self.origins(port))}{_allow_hint(origins[0])}"
+            )
         return None
 
     def check(self, origins: list[str], hosts: list[str], port: int) -> str | None:

@@ -29,7 +29,7 @@ from l3mvn_studio.state import MapView, Metrics, Snapshot
 
 POLICY_NOTES = {
     "random-walk": "random-walk is the paper's baseline: uniformly random actions, STOP among them, "
-                   "so most episodes end within a few steps",
+    "so most episodes end within a few steps",
 }
 
 
@@ -81,21 +81,28 @@ def no_map_markdown(policy: str, *, started: bool) -> str:
     """The Frontiers panel without a map: why, for the policy that is chosen."""
     if not keeps_map(policy):
         return f"_no frontiers: policy {md(repr(policy))} keeps no map (the map view shows the ground-truth plan)_"
-    return ("_frontiers appear after the agent's first steps_" if started
-            else f"_policy {md(repr(policy))} builds a map: frontiers appear after Reset and the first steps_")
+    return (
+        "_frontiers appear after the agent's first steps_"
+        if started
+        else f"_policy {md(repr(policy))} builds a map: frontiers appear after Reset and the first steps_"
+    )
 
 
 def frontier_markdown(view: MapView) -> str:
     """The Frontiers table, best score first, then each frontier's first language query."""
     if not view.frontiers:
-        return ("_no frontiers: the policy keeps no map_" if view.source != "agent map"
-                else "_no frontiers on the map right now_")
+        return (
+            "_no frontiers: the policy keeps no map_"
+            if view.source != "agent map"
+            else "_no frontiers on the map right now_"
+        )
     rows = ["| | S_LLM | S_CU | fused | objects |", "|---|---|---|---|---|"]
     for f in sorted(view.frontiers, key=frontier_score, reverse=True):
         llm = "-" if f.s_llm is None else f"{f.s_llm:.2f}"
         fused = "-" if f.fused is None else f"{f.fused:.2f}"
-        rows.append(f"| {'★' if f.chosen else ''}F{f.id} | {llm} | {f.s_cu:.2f} | {fused} | "
-                    f"{md(', '.join(f.objects) or '-')} |")
+        rows.append(
+            f"| {'★' if f.chosen else ''}F{f.id} | {llm} | {f.s_cu:.2f} | {fused} | {md(', '.join(f.objects) or '-')} |"
+        )
     queries = [f"- F{f.id} {code(q)}" for f in view.frontiers for q in list(f.queries.values())[:1]]
     note = f"\n\n_Map labels show the best {TOP_LABELS} and the chosen (★) frontier; all are listed here._"
     return "\n".join(rows) + note + ("\n\n**Queries**\n" + "\n".join(queries) if queries else "")
@@ -112,22 +119,36 @@ def unavailable_markdown(problems: dict[str, str]) -> str:
 def legend_html(categories, *, target: str = "", ground_truth: bool = False) -> str:
     """Map colours, then the object categories the map shows, the target first and ringed as on
     the map; the ground-truth layer's colours when it is on; then the frontier score colour bar."""
-    fixed = [("unexplored", UNEXPLORED), ("free", FREE), ("seen from afar", GLIMPSED), ("obstacle", OBSTACLE),
-             ("obstacle too near for depth (guessed)", GUESSED), ("collision marks", COLLISION_RGB),
-             ("trajectory", TRAJECTORY)]
+    fixed = [
+        ("unexplored", UNEXPLORED),
+        ("free", FREE),
+        ("seen from afar", GLIMPSED),
+        ("obstacle", OBSTACLE),
+        ("obstacle too near for depth (guessed)", GUESSED),
+        ("collision marks", COLLISION_RGB),
+        ("trajectory", TRAJECTORY),
+    ]
     item = '<span style="display:inline-block;margin:2px 8px 2px 0;font-size:12px">{}</span>'
     cats = sorted(categories, key=lambda c: c[0] != target)
     parts = [item.format(_swatch(rgb) + name) for name, rgb in fixed]
-    parts += [item.format(_swatch(rgb, ring=name == target)
-                          + (f"<b>{html(name)} (target)</b>" if name == target else html(name))) for name, rgb in cats]
+    parts += [
+        item.format(
+            _swatch(rgb, ring=name == target) + (f"<b>{html(name)} (target)</b>" if name == target else html(name))
+        )
+        for name, rgb in cats
+    ]
     if ground_truth:
-        parts += [item.format(_swatch(rgba[:3]) + f"<b>ground truth</b>: {name}") for name, rgba in
-                  (("floor plan", GT_FLOOR), ("success region", GT_REGION), ("goal instances", GT_GOAL))]
+        parts += [
+            item.format(_swatch(rgba[:3]) + f"<b>ground truth</b>: {name}")
+            for name, rgba in (("floor plan", GT_FLOOR), ("success region", GT_REGION), ("goal instances", GT_GOAL))
+        ]
     stops = ", ".join(f"rgb{score_color(s / 4)}" for s in range(5))
-    bar = (f'<div style="font-size:12px;margin-top:4px">frontier score 0 '
-           f'<span style="display:inline-block;width:120px;height:10px;vertical-align:middle;'
-           f'background:linear-gradient(to right, {stops})"></span> 1 (fused where the policy fuses, '
-           f'else cost-utility)</div>')
+    bar = (
+        f'<div style="font-size:12px;margin-top:4px">frontier score 0 '
+        f'<span style="display:inline-block;width:120px;height:10px;vertical-align:middle;'
+        f'background:linear-gradient(to right, {stops})"></span> 1 (fused where the policy fuses, '
+        f"else cost-utility)</div>"
+    )
     return f'<div style="line-height:1.2">{"".join(parts)}</div>{bar}'
 
 
@@ -147,5 +168,7 @@ def _manual_goal_words(snap: Snapshot) -> str:
 
 def _swatch(rgb, *, ring: bool = False) -> str:
     border = "3px double #000" if ring else "1px solid #888"
-    return (f'<span style="display:inline-block;width:11px;height:11px;border:{border};'
-            f'background:rgb{tuple(int(v) for v in rgb)};margin-right:4px;vertical-align:middle"></span>')
+    return (
+        f'<span style="display:inline-block;width:11px;height:11px;border:{border};'
+        f'background:rgb{tuple(int(v) for v in rgb)};margin-right:4px;vertical-align:middle"></span>'
+    )

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import viser
 
-from l3mvn_studio.page_text import code
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.recording import list_recordings
 from l3mvn.run.recording.replay import WebViewer, start_web_viewer
+from l3mvn_studio.page_text import code
 
 log = logging.getLogger(__name__)
 
@@ -29,8 +29,9 @@ LISTED = 8  # recordings the list names; the dropdown offers every one
 class RecordingsPanel:
     """Builds the Recordings folder and answers its controls (one viewer shared by every tab)."""
 
-    def __init__(self, gui: viser.GuiApi, record_dir: Callable[[], str | Path], host: str, *, on: Callable,
-                 tell: Callable) -> None:
+    def __init__(
+        self, gui: viser.GuiApi, record_dir: Callable[[], str | Path], host: str, *, on: Callable, tell: Callable
+    ) -> None:
         """``record_dir`` gives the folder the dashboard records into now (it may change)."""
         self._record_dir, self.host, self._tell = record_dir, host, tell
         self._viewer: WebViewer | None = None
@@ -68,7 +69,9 @@ class RecordingsPanel:
         self.pick.value = keep
         self.pick.disabled = not found
         if not found:
-            self.listing.content = f"_no recordings in {code(f'{self.record_dir}/')} yet: tick Record (.rrd), then Reset_"
+            self.listing.content = (
+                f"_no recordings in {code(f'{self.record_dir}/')} yet: tick Record (.rrd), then Reset_"
+            )
             return
         lines = [f"{len(found)} in {code(f'{self.record_dir}/')}, newest first:", ""]
         lines += [f"- {code(info.path.name)} ({info.size_bytes / 1e6:.1f} MB)" for info in found[:LISTED]]
@@ -78,14 +81,18 @@ class RecordingsPanel:
         """Serve recording ``name`` (a file of the folder, nothing else) in rerun's web viewer."""
         offered = {info.path.name: info.path for info in list_recordings(self.record_dir)}
         if name not in offered:
-            raise L3MVNError(f"no recording {name!r} in {self.record_dir}; valid: "
-                             f"{', '.join(offered) or 'none yet (tick Record, then Reset)'}")
+            raise L3MVNError(
+                f"no recording {name!r} in {self.record_dir}; valid: "
+                f"{', '.join(offered) or 'none yet (tick Record, then Reset)'}"
+            )
         with self._lock:
             if self._viewer is not None:
                 self._viewer.stop()
             self._viewer = viewer = start_web_viewer(offered[name], self.host)
-        self.link.content = (f"**[Open {code(name)} in rerun]({viewer.url})** (rerun's web viewer, a new tab; "
-                             "opening another recording stops this one)")
+        self.link.content = (
+            f"**[Open {code(name)} in rerun]({viewer.url})** (rerun's web viewer, a new tab; "
+            "opening another recording stops this one)"
+        )
         self._tell(client_id, f"rerun serves {name}: follow the link in the Recordings folder")
         log.info("rerun web viewer for %s at %s", name, viewer.url)
         return viewer

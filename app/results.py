@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from l3mvn_studio.map_image import png_bytes
 from l3mvn.core.config import Config
 from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.run.eval.job import EvalJob
@@ -23,6 +22,7 @@ from l3mvn.run.eval.results import episode_lines
 from l3mvn.run.recording.catalogue import find_recording, recording_path, unique_tag
 from l3mvn.run.recording.drawing import VideoOptions, frames
 from l3mvn.run.recording.recorded import read_episode
+from l3mvn_studio.map_image import png_bytes
 
 ALL, FAILURES, SUCCESSES = "all", "failures", "successes"
 SORT_KEYS = ("row", "scene", "goal", "success", "spl", "dtg", "steps", "failure", "coverage")
@@ -80,12 +80,27 @@ def load_result_file(path: str | Path) -> ResultFile:
     for n, row in read.rows:
         extra = row.get("extra") if isinstance(row.get("extra"), dict) else {}
         coverage = extra.get("coverage")
-        rows.append(EpisodeRow(n, row["scene"], row["episode_id"], row["goal"], row["policy"], row["success"] == 1,
-                               row["spl"], row["dtg"], row["steps"], row["failure"],
-                               coverage if _is_number(coverage) else None, row))
+        rows.append(
+            EpisodeRow(
+                n,
+                row["scene"],
+                row["episode_id"],
+                row["goal"],
+                row["policy"],
+                row["success"] == 1,
+                row["spl"],
+                row["dtg"],
+                row["steps"],
+                row["failure"],
+                coverage if _is_number(coverage) else None,
+                row,
+            )
+        )
     if not rows:
-        raise L3MVNError(f"{p.name} is not an eval result file: no episode line"
-                         + (f" ({read.problems[0]})" if read.problems else ""))
+        raise L3MVNError(
+            f"{p.name} is not an eval result file: no episode line"
+            + (f" ({read.problems[0]})" if read.problems else "")
+        )
     return ResultFile(p, tuple(rows), tuple(read.problems))
 
 
@@ -127,8 +142,10 @@ def summaries(rows: list[EpisodeRow], by: str = "goal") -> tuple[dict[str, tuple
     groups: dict[str, list[EpisodeRow]] = defaultdict(list)
     for r in rows:
         groups[getattr(r, by)].append(r)
-    per_group = {g: (len(rs), float(np.mean([r.success for r in rs])), float(np.mean([r.spl or 0.0 for r in rs])))
-                 for g, rs in sorted(groups.items())}
+    per_group = {
+        g: (len(rs), float(np.mean([r.success for r in rs])), float(np.mean([r.spl or 0.0 for r in rs])))
+        for g, rs in sorted(groups.items())
+    }
     causes: dict[str, int] = defaultdict(int)
     for r in rows:
         causes[r.failure] += 1
@@ -169,10 +186,13 @@ def config_of(row: dict) -> Config:
         if section is None or not dataclasses.is_dataclass(section) or not isinstance(values, dict):
             raise L3MVNError(f"the stored config has an unknown section {name!r}: it cannot be re-run")
         try:
-            sections[name] = dataclasses.replace(section, **{k: tuple(v) if isinstance(v, list) else v
-                                                             for k, v in values.items()})
+            sections[name] = dataclasses.replace(
+                section, **{k: tuple(v) if isinstance(v, list) else v for k, v in values.items()}
+            )
         except TypeError as exc:
-            raise L3MVNError(f"the stored config's {name} section does not fit this version: {first_line(exc)}") from None
+            raise L3MVNError(
+                f"the stored config's {name} section does not fit this version: {first_line(exc)}"
+            ) from None
     return base.replace(**sections)
 
 
@@ -190,22 +210,42 @@ class Rerun:
         new = self.row
         verdict = "same result as stored" if self.reproduced else "DIFFERENT result from stored"
         seed = "" if self.same_config else " (config hash differs: another seed or config made the stored line)"
-        return (f"re-run {new.get('key')}: success {new.get('success')}, SPL {new.get('spl')}, steps "
-                f"{new.get('steps')}, {new.get('failure')}: {verdict}{seed}")
+        return (
+            f"re-run {new.get('key')}: success {new.get('success')}, SPL {new.get('spl')}, steps "
+            f"{new.get('steps')}, {new.get('failure')}: {verdict}{seed}"
+        )
 
 
-def rerun(row: dict, *, dataset: str | None, split: str, houses: int, episodes_per_house: int, seed: int,
-          record_dir: str | Path) -> Rerun:
+def rerun(
+    row: dict,
+    *,
+    dataset: str | None,
+    split: str,
+    houses: int,
+    episodes_per_house: int,
+    seed: int,
+    record_dir: str | Path,
+) -> Rerun:
     """Run the line's episode again, exactly as ``l3mvn eval`` did (same job path, its stored config and
     policy, this dashboard's episode set and seed), recorded under a name of its own in ``record_dir``
     (``unique_tag``), so a re-run never replaces a recording and concurrent re-runs never share a file."""
     cfg = config_of(row)
-    job = EvalJob.create(dataset, split, houses=houses, episodes_per_house=episodes_per_house, seed=seed,
-                         config=cfg, policy=str(row.get("policy")), record_dir=record_dir)
+    job = EvalJob.create(
+        dataset,
+        split,
+        houses=houses,
+        episodes_per_house=episodes_per_house,
+        seed=seed,
+        config=cfg,
+        policy=str(row.get("policy")),
+        record_dir=record_dir,
+    )
     key = str(row.get("key"))
     if key not in set(job.keys()):
-        raise L3MVNError(f"episode {key} is not in this dashboard's episode set; start serve with the eval's "
-                         "--dataset/--houses/--episodes-per-house/--seed")
+        raise L3MVNError(
+            f"episode {key} is not in this dashboard's episode set; start serve with the eval's "
+            "--dataset/--houses/--episodes-per-house/--seed"
+        )
     tag = unique_tag("rerun")
     new = job.run_one(key, record_tag=tag)
     if "error" in new:
@@ -216,6 +256,6 @@ def rerun(row: dict, *, dataset: str | None, split: str, houses: int, episodes_p
     recording = recording_path(record_dir, job.load().name, new["scene"], new["episode_id"], job.policy, tag)
     if not recording.is_file():
         raise L3MVNError(f"re-running {key} wrote no recording at {recording}")
-    return Rerun(new, job.config_hash == row.get("config_hash"), all(new.get(f) == row.get(f) for f in fields),
-                 recording)
-
+    return Rerun(
+        new, job.config_hash == row.get("config_hash"), all(new.get(f) == row.get(f) for f in fields), recording
+    )

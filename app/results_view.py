@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import viser
 
+from l3mvn.core.errors import L3MVNError
 from l3mvn_studio.compare_view import ComparePanel, main_view_html
 from l3mvn_studio.map_image import png_rgb
 from l3mvn_studio.page_text import code, html, md
@@ -36,15 +37,16 @@ from l3mvn_studio.results import (
     solved_by_one,
     summaries,
 )
-from l3mvn.core.errors import L3MVNError
 
 log = logging.getLogger(__name__)
 
 NONE = "(none)"
 TABLE_ROWS = 40  # rows the table shows; the episode dropdown holds them all
-RERUN_NOTE = ("Re-run runs the episode again with the config stored in its line, this dashboard's "
-              "episode set and seed, and records it: the same seed gives the same result (checked, "
-              "and said, after each re-run).")
+RERUN_NOTE = (
+    "Re-run runs the episode again with the config stored in its line, this dashboard's "
+    "episode set and seed, and records it: the same seed gives the same result (checked, "
+    "and said, after each re-run)."
+)
 
 
 @dataclass(frozen=True)
@@ -64,8 +66,15 @@ class ResultsSource:
 class ResultsPanel:
     """Builds the Results folder in the GUI and answers its controls (one state shared by every tab)."""
 
-    def __init__(self, gui: viser.GuiApi, source: ResultsSource, *, on: Callable, tell: Callable,
-                 compare: ComparePanel | None = None) -> None:
+    def __init__(
+        self,
+        gui: viser.GuiApi,
+        source: ResultsSource,
+        *,
+        on: Callable,
+        tell: Callable,
+        compare: ComparePanel | None = None,
+    ) -> None:
         self.source, self._tell, self._compare_panel = source, tell, compare
         self._file: ResultFile | None = None
         self._other: ResultFile | None = None
@@ -74,8 +83,10 @@ class ResultsPanel:
         self._decisions: list[str] = []
         self._lock = threading.Lock()
         with gui.add_folder("Results", expand_by_default=True):
-            gui.add_markdown(f"Eval result files in {code(source.results_dir)}; recordings from "
-                             f"{code(source.recordings_dir)}; re-runs recorded in {code(source.rerun_dir)}.")
+            gui.add_markdown(
+                f"Eval result files in {code(source.results_dir)}; recordings from "
+                f"{code(source.recordings_dir)}; re-runs recorded in {code(source.rerun_dir)}."
+            )
             self.file = gui.add_dropdown("Result file", self._file_names())
             self.refresh = gui.add_button("Refresh files")
             self.notes = gui.add_markdown("")
@@ -88,15 +99,21 @@ class ResultsPanel:
             self.actions = gui.add_button_group("Episode actions", ("Open", "Re-run live"))
             self.step = gui.add_slider("Step", min=0, max=1, step=1, initial_value=0, disabled=True)
             self.picture = gui.add_image(np.zeros((8, 8, 3), np.uint8), label="Recorded step")
-            self.main_view = gui.add_checkbox("Recorded step in main view", True,
-                                              hint="draw the recorded step over the live map, large; untick for the map")
+            self.main_view = gui.add_checkbox(
+                "Recorded step in main view",
+                True,
+                hint="draw the recorded step over the live map, large; untick for the map",
+            )
             self.large = gui.add_html("")
             self.decision = gui.add_markdown("")
             gui.add_markdown(RERUN_NOTE)
             self.compare = gui.add_dropdown("Compare with", (NONE,) + self._file_names())
             self.comparison = gui.add_markdown("")
-            self.side_by_side = gui.add_button("Compare side by side", disabled=compare is None,
-                                               hint="the selected episode in both files, step by step (Compare folder)")
+            self.side_by_side = gui.add_button(
+                "Compare side by side",
+                disabled=compare is None,
+                hint="the selected episode in both files, step by step (Compare folder)",
+            )
         self._wire(on)
         if self.file.value != NONE:
             try:
@@ -106,8 +123,19 @@ class ResultsPanel:
 
     @property
     def inputs(self) -> tuple:
-        return (self.file, self.refresh, self.filter, self.sort, self.descending, self.episode, self.actions,
-                self.step, self.main_view, self.compare, self.side_by_side)
+        return (
+            self.file,
+            self.refresh,
+            self.filter,
+            self.sort,
+            self.descending,
+            self.episode,
+            self.actions,
+            self.step,
+            self.main_view,
+            self.compare,
+            self.side_by_side,
+        )
 
     # --- controls ----------------------------------------------------------------------------
     def _wire(self, on: Callable) -> None:
@@ -120,7 +148,9 @@ class ResultsPanel:
             names = self._file_names()
             self.file.options = names
             self.compare.options = (NONE,) + names
-            self._tell(event.client_id, f"{len([n for n in names if n != NONE])} result files in {self.source.results_dir}")
+            self._tell(
+                event.client_id, f"{len([n for n in names if n != NONE])} result files in {self.source.results_dir}"
+            )
 
         for handle in (self.filter, self.sort, self.descending):
             on(handle)(lambda event: self._show_table())
@@ -152,7 +182,9 @@ class ResultsPanel:
                 raise L3MVNError("pick a second file in Compare with first: the episode opens with each file's line")
             other = next((r for r in self._other.rows if r.raw["key"] == row.raw["key"]), None)
             if other is None:
-                raise L3MVNError(f"episode {row.raw['key']} is not in {self._other.path.name}; pick one both files hold")
+                raise L3MVNError(
+                    f"episode {row.raw['key']} is not in {self._other.path.name}; pick one both files hold"
+                )
             self._compare_panel.open_rows(row, other, self.source.recordings_dir, event.client_id)
 
     def _file_names(self) -> tuple[str, ...]:
@@ -162,8 +194,10 @@ class ResultsPanel:
     def _load(self, name: str) -> None:
         """Show the file ``name``; a file that is not a result file leaves the last one shown and says why."""
         if name == NONE:
-            raise L3MVNError(f"no result file in {self.source.results_dir}: run `l3mvn eval --out "
-                             f"{self.source.results_dir}/NAME.jsonl` first")
+            raise L3MVNError(
+                f"no result file in {self.source.results_dir}: run `l3mvn eval --out "
+                f"{self.source.results_dir}/NAME.jsonl` first"
+            )
         try:
             loaded = load_result_file(self.source.results_dir / name)
         except L3MVNError as exc:
@@ -195,8 +229,10 @@ class ResultsPanel:
         s = self.source
         path = path or recording_of(s.recordings_dir, row) or recording_of(s.rerun_dir, row)
         if path is None:
-            self._clear_steps(f"no recording of {row.scene} episode {row.episode_id} ({row.policy}) in "
-                              f"{s.recordings_dir} or {s.rerun_dir}: press Re-run live to run and record it")
+            self._clear_steps(
+                f"no recording of {row.scene} episode {row.episode_id} ({row.policy}) in "
+                f"{s.recordings_dir} or {s.rerun_dir}: press Re-run live to run and record it"
+            )
             raise L3MVNError(f"no recording of this episode in {s.recordings_dir} or {s.rerun_dir}; press Re-run live")
         pictures, decisions = recording_frames(path)
         if not pictures:
@@ -212,8 +248,15 @@ class ResultsPanel:
     def _rerun(self, row: EpisodeRow, client_id: int | None) -> None:
         s = self.source
         self._tell(client_id, f"re-running {row.raw.get('key')} ({row.policy}); this takes a few seconds")
-        done = rerun(row.raw, dataset=s.dataset, split=s.split, houses=s.houses,
-                     episodes_per_house=s.episodes_per_house, seed=s.seed, record_dir=s.rerun_dir)
+        done = rerun(
+            row.raw,
+            dataset=s.dataset,
+            split=s.split,
+            houses=s.houses,
+            episodes_per_house=s.episodes_per_house,
+            seed=s.seed,
+            record_dir=s.rerun_dir,
+        )
         self.decision.content = md(done.summary)
         self._tell(client_id, done.summary, "info" if done.reproduced else "warning")
         self._open(row, client_id, done.recording)
@@ -228,8 +271,9 @@ class ResultsPanel:
         picture = png_rgb(png)
         self.picture.image = picture
         self.decision.content = md(line)
-        self.large.content = (main_view_html(picture, f"Recorded step: {line}", main_view=True)
-                              if self.main_view.value else "")
+        self.large.content = (
+            main_view_html(picture, f"Recorded step: {line}", main_view=True) if self.main_view.value else ""
+        )
 
     def _clear_steps(self, note: str) -> None:
         with self._lock:
@@ -247,10 +291,12 @@ class ResultsPanel:
         other = self._other = load_result_file(self.source.results_dir / name)
         only_a, only_b = solved_by_one(self._file.rows, other.rows)
         here = self._file.path.name
-        self.comparison.content = (f"Solved by **{md(here)}** only ({len(only_a)}): "
-                                   + md(", ".join(str(r.raw["key"]) for r in only_a) or "none")
-                                   + f"\n\nSolved by **{md(name)}** only ({len(only_b)}): "
-                                   + md(", ".join(str(r.raw["key"]) for r in only_b) or "none"))
+        self.comparison.content = (
+            f"Solved by **{md(here)}** only ({len(only_a)}): "
+            + md(", ".join(str(r.raw["key"]) for r in only_a) or "none")
+            + f"\n\nSolved by **{md(name)}** only ({len(only_b)}): "
+            + md(", ".join(str(r.raw["key"]) for r in only_b) or "none")
+        )
 
 
 def _number(v: float | None, digits: int = 2) -> str:
@@ -264,8 +310,10 @@ _COLUMNS = ("#", "scene", "ep", "goal", "ok", "SPL", "DTG", "steps", "cause", "c
 def _html_table(head: tuple[str, ...], rows: list[tuple], caption: str = "") -> str:
     table, cell = _TABLE_STYLE
     th = "".join(f"<th style='{cell}'>{html(h)}</th>" for h in head)
-    body = "".join("<tr>" + "".join(f"<td style='{cell}'>{v if isinstance(v, _Raw) else html(str(v))}</td>"
-                                    for v in row) + "</tr>" for row in rows)
+    body = "".join(
+        "<tr>" + "".join(f"<td style='{cell}'>{v if isinstance(v, _Raw) else html(str(v))}</td>" for v in row) + "</tr>"
+        for row in rows
+    )
     cap = f"<div style='font-size:12px;font-weight:600;margin-top:6px'>{html(caption)}</div>" if caption else ""
     return f"{cap}<div style='overflow-x:auto'><table style='{table}'><tr>{th}</tr>{body}</table></div>"
 
@@ -277,17 +325,36 @@ class _Raw(str):
 def _table_html(rows: list[EpisodeRow]) -> str:
     if not rows:
         return "<i>no episode matches the filter</i>"
-    cells = [(r.index, r.scene.removeprefix("procedural-"), r.episode_id, r.goal, "yes" if r.success else "no",
-              _number(r.spl), _number(r.dtg, 1), r.steps, r.failure, _number(r.coverage)) for r in rows[:TABLE_ROWS]]
-    more = f"<div style='font-size:11px'>{len(rows) - TABLE_ROWS} more in the Episode list</div>" if len(rows) > TABLE_ROWS else ""
+    cells = [
+        (
+            r.index,
+            r.scene.removeprefix("procedural-"),
+            r.episode_id,
+            r.goal,
+            "yes" if r.success else "no",
+            _number(r.spl),
+            _number(r.dtg, 1),
+            r.steps,
+            r.failure,
+            _number(r.coverage),
+        )
+        for r in rows[:TABLE_ROWS]
+    ]
+    more = (
+        f"<div style='font-size:11px'>{len(rows) - TABLE_ROWS} more in the Episode list</div>"
+        if len(rows) > TABLE_ROWS
+        else ""
+    )
     policies = ", ".join(sorted({r.policy for r in rows}))
     return _html_table(_COLUMNS, cells, f"{len(rows)} episodes ({policies})") + more
 
 
 def _bar(fraction: float, colour: str = "#2860c8", width: int = 80) -> _Raw:
     w = round(max(0.0, min(1.0, fraction)) * width)
-    return _Raw(f"<span style='display:inline-block;width:{width}px;height:8px;background:#ddd'>"
-                f"<span style='display:block;width:{w}px;height:8px;background:{colour}'></span></span>")
+    return _Raw(
+        f"<span style='display:inline-block;width:{width}px;height:8px;background:#ddd'>"
+        f"<span style='display:block;width:{w}px;height:8px;background:{colour}'></span></span>"
+    )
 
 
 def _summary_html(rows: list[EpisodeRow]) -> str:
@@ -296,11 +363,19 @@ def _summary_html(rows: list[EpisodeRow]) -> str:
     out = []
     for by in ("goal", "scene"):
         groups, causes = summaries(rows, by)
-        out.append(_html_table((by, "eps", "SR", "", "SPL"),
-                               [(g, n, _bar(sr), f"{sr:.2f}", f"{spl:.2f}") for g, (n, sr, spl) in groups.items()],
-                               f"Per {'category' if by == 'goal' else by}"))
+        out.append(
+            _html_table(
+                (by, "eps", "SR", "", "SPL"),
+                [(g, n, _bar(sr), f"{sr:.2f}", f"{spl:.2f}") for g, (n, sr, spl) in groups.items()],
+                f"Per {'category' if by == 'goal' else by}",
+            )
+        )
     total = sum(causes.values())
-    out.append(_html_table(("outcome", "", "episodes"),
-                           [(c, _bar(n / total, "#28a046" if c == "success" else "#c83030"), n)
-                            for c, n in causes.items()], "Per outcome"))
+    out.append(
+        _html_table(
+            ("outcome", "", "episodes"),
+            [(c, _bar(n / total, "#28a046" if c == "success" else "#c83030"), n) for c, n in causes.items()],
+            "Per outcome",
+        )
+    )
     return "".join(out)

@@ -71,18 +71,36 @@ class MapScene:
         scene = server.scene
         scene.set_up_direction("+y")
         scene.add_light_ambient("/light", intensity=1.0)
-        self.map_plane = scene.add_image("/map", np.zeros((8, 8, 3), np.uint8), 1.0, 1.0, format="png",
-                                         cast_shadow=False, receive_shadow=False, visible=False)
-        self.map_note = scene.add_label("/map_note", "Press Reset (or Run) to start an episode", position=(0, 0, 0.2),
-                                        font_screen_scale=1.4)
+        self.map_plane = scene.add_image(
+            "/map",
+            np.zeros((8, 8, 3), np.uint8),
+            1.0,
+            1.0,
+            format="png",
+            cast_shadow=False,
+            receive_shadow=False,
+            visible=False,
+        )
+        self.map_note = scene.add_label(
+            "/map_note", "Press Reset (or Run) to start an episode", position=(0, 0, 0.2), font_screen_scale=1.4
+        )
         self.agent = scene.add_mesh_simple("/agent", *_arrow_mesh(), color=(230, 30, 40), visible=False)
         # Above the frontier spheres (a top-down camera sees it in front of the chosen one).
         self.ltg = scene.add_icosphere("/goal/long_term", 0.16, (220, 20, 60), visible=False)
-        self.ltg_label = scene.add_label("/goal/long_term/label", "long-term goal", position=(0.0, -0.3, 0.1),
-                                         anchor="top-center")
+        self.ltg_label = scene.add_label(
+            "/goal/long_term/label", "long-term goal", position=(0.0, -0.3, 0.1), anchor="top-center"
+        )
         self.stg = scene.add_icosphere("/goal/short_term", 0.08, (255, 150, 0), visible=False)
-        self.gt_plane = scene.add_image("/ground_truth", np.zeros((8, 8, 4), np.uint8), 1.0, 1.0, format="png",
-                                        cast_shadow=False, receive_shadow=False, visible=False)
+        self.gt_plane = scene.add_image(
+            "/ground_truth",
+            np.zeros((8, 8, 4), np.uint8),
+            1.0,
+            1.0,
+            format="png",
+            cast_shadow=False,
+            receive_shadow=False,
+            visible=False,
+        )
         self.gt_label = scene.add_label("/ground_truth_label", "", position=(0, 0, 0.3), visible=False)
         self._markers: list[tuple[viser.IcosphereHandle, viser.LabelHandle]] = []
         self._fitted: tuple | None = None  # (episode, source, crop in cells) the cameras were fitted to
@@ -114,8 +132,9 @@ class MapScene:
         self.agent.visible = True
         self._draw_long_term_goal(view, snap.manual_goal)
         _place(self.stg, view.short_term_goal, res, 0.08)
-        self.map_note.text = ("" if view.source == "agent map"
-                              else f"ground-truth floor plan: policy {snap.policy!r} keeps no map")
+        self.map_note.text = (
+            "" if view.source == "agent map" else f"ground-truth floor plan: policy {snap.policy!r} keeps no map"
+        )
         x0, y0 = cell_to_xy(view.origin, res)
         self.map_note.position = (x0, y0 + 0.4, 0.2)
         self._draw_frontiers(view)
@@ -143,8 +162,11 @@ class MapScene:
             where = layer.goal_cell if layer.goal_cell is not None else view.agent_cell
             gx, gy = cell_to_xy(where, res)
             self.gt_label.position = (gx, gy, 0.3)
-            self.gt_label.text = (f"GROUND TRUTH: {event.goal} (not known to the agent)" if layer.goal_cell
-                                  else f"GROUND TRUTH: no {event.goal} in this scene")
+            self.gt_label.text = (
+                f"GROUND TRUTH: {event.goal} (not known to the agent)"
+                if layer.goal_cell
+                else f"GROUND TRUTH: no {event.goal} in this scene"
+            )
             self._gt_key = key
         self.gt_plane.visible = self.gt_label.visible = True
 
@@ -160,8 +182,9 @@ class MapScene:
             self.ltg_label.text = ""
         else:
             _place(self.ltg, view.long_term_goal, res, z)
-            self.ltg_label.text = ("manual goal" if view.goal_kind == "manual"
-                                   else f"long-term goal ({view.goal_kind or '-'})")
+            self.ltg_label.text = (
+                "manual goal" if view.goal_kind == "manual" else f"long-term goal ({view.goal_kind or '-'})"
+            )
 
     def _draw_frontiers(self, view: MapView) -> None:
         """A sphere per frontier coloured by its score; labels on the best few only (the rest are
@@ -170,8 +193,9 @@ class MapScene:
         while len(self._markers) < len(view.frontiers):
             i = len(self._markers)
             sphere = self._server.scene.add_icosphere(f"/frontiers/{i}", MARKER_RADIUS_M, (150, 150, 150))
-            label = self._server.scene.add_label(f"/frontiers/{i}/label", "", position=(0.0, 0.3, 0.0),
-                                                 font_screen_scale=0.75, anchor="bottom-center")
+            label = self._server.scene.add_label(
+                f"/frontiers/{i}/label", "", position=(0.0, 0.3, 0.0), font_screen_scale=0.75, anchor="bottom-center"
+            )
             self._markers.append((sphere, label))
         labelled = labelled_frontiers(view.frontiers)
         for i, (sphere, label) in enumerate(self._markers):

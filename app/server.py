@@ -3,23 +3,23 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
 
 import viser
 
+from l3mvn.core.config import Config
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.recording.catalogue import DEFAULT_RECORD_DIR
+from l3mvn.run.serving import check_listen_address
+from l3mvn.world.datasets import load_episode_set
 from l3mvn_studio.compare import EpisodeSource
 from l3mvn_studio.origin import ALLOW_ORIGIN_FLAG, LOOPBACK_HOSTS, OriginPolicy
 from l3mvn_studio.results_view import ResultsSource
 from l3mvn_studio.session_worker import DashboardController
 from l3mvn_studio.views import DashboardView
 from l3mvn_studio.viser_hooks import start_checked_server
-from l3mvn.core.config import Config
-from l3mvn.world.datasets import load_episode_set
-from l3mvn.core.errors import L3MVNError
-from l3mvn.run.recording.catalogue import DEFAULT_RECORD_DIR
-from l3mvn.run.serving import check_listen_address
 
 log = logging.getLogger(__name__)
 
@@ -46,13 +46,26 @@ class Dashboard:
         self.server.stop()
 
 
-def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", policy: str = "oracle",
-                    host: str = "127.0.0.1", port: int = 8080, houses: int = 3,
-                    episodes_per_house: int = 5, seed: int = 0, cfg: Config | None = None,
-                    steps_per_second: float = 4.0, record: bool = False,
-                    record_dir: str | Path | None = None, verbose: bool = False,
-                    allow_origins: Iterable[str] = (), results_dir: str | Path | None = None,
-                    recordings_dir: str | Path | None = None, scenes_dir: str | Path | None = None) -> Dashboard:
+def start_dashboard(
+    *,
+    dataset: str | Path | None = None,
+    split: str = "val",
+    policy: str = "oracle",
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    houses: int = 3,
+    episodes_per_house: int = 5,
+    seed: int = 0,
+    cfg: Config | None = None,
+    steps_per_second: float = 4.0,
+    record: bool = False,
+    record_dir: str | Path | None = None,
+    verbose: bool = False,
+    allow_origins: Iterable[str] = (),
+    results_dir: str | Path | None = None,
+    recordings_dir: str | Path | None = None,
+    scenes_dir: str | Path | None = None,
+) -> Dashboard:
     """Load the episodes, start the worker and serve the page (returns at once; threads run it).
 
     Only pages served from this dashboard's own address, or from one of ``allow_origins`` (a reverse
@@ -76,26 +89,54 @@ def start_dashboard(*, dataset: str | Path | None = None, split: str = "val", po
     recordings = Path(recordings_dir if recordings_dir is not None else DEFAULT_RECORD_DIR)
     reruns = None if results_dir is None else rerun_folder(recordings, record_dir)
     if host not in LOOPBACK_HOSTS:
-        log.warning("serving on %s: anyone who can reach this machine can drive the dashboard; browsers "
-                    "that open it by another name need %s http://NAME:%d", host, ALLOW_ORIGIN_FLAG, port)
-    episodes = load_episode_set(dataset, split, houses=houses, episodes_per_house=episodes_per_house,
-                                seed=seed, cfg=cfg, scenes_dir=scenes_dir)
-    controller = DashboardController(episodes, cfg, policy=policy, seed=seed, steps_per_second=steps_per_second,
-                                     record_dir=record_dir if record_dir is not None else DEFAULT_RECORD_DIR)
+        log.warning(
+            "serving on %s: anyone who can reach this machine can drive the dashboard; browsers "
+            "that open it by another name need %s http://NAME:%d",
+            host,
+            ALLOW_ORIGIN_FLAG,
+            port,
+        )
+    episodes = load_episode_set(
+        dataset, split, houses=houses, episodes_per_house=episodes_per_house, seed=seed, cfg=cfg, scenes_dir=scenes_dir
+    )
+    controller = DashboardController(
+        episodes,
+        cfg,
+        policy=policy,
+        seed=seed,
+        steps_per_second=steps_per_second,
+        record_dir=record_dir if record_dir is not None else DEFAULT_RECORD_DIR,
+    )
     try:
         if record:
             controller.set_record(True)
-        server = start_checked_server(origins.check, host=host, port=port, label="L3MVN Studio",
-                                      verbose=verbose)
+        server = start_checked_server(origins.check, host=host, port=port, label="L3MVN Studio", verbose=verbose)
     except BaseException:
         controller.close()
         raise
     try:
-        source = None if reruns is None else ResultsSource(
-            Path(results_dir), recordings, reruns, None if dataset is None else str(dataset), split, houses,
-            episodes_per_house, seed)
-        episodes_source = EpisodeSource(None if dataset is None else str(dataset), split, houses, episodes_per_house,
-                                        seed, None if scenes_dir is None else str(scenes_dir))
+        source = (
+            None
+            if reruns is None
+            else ResultsSource(
+                Path(results_dir),
+                recordings,
+                reruns,
+                None if dataset is None else str(dataset),
+                split,
+                houses,
+                episodes_per_house,
+                seed,
+            )
+        )
+        episodes_source = EpisodeSource(
+            None if dataset is None else str(dataset),
+            split,
+            houses,
+            episodes_per_house,
+            seed,
+            None if scenes_dir is None else str(scenes_dir),
+        )
         view = DashboardView(server, controller, source, episodes_source)
     except BaseException:
         controller.close()
@@ -111,6 +152,8 @@ def rerun_folder(recordings_dir: Path, record_dir: str | Path | None) -> Path:
     eval's recordings. A re-run must never write among the recordings it is compared with."""
     folder = Path(record_dir) if record_dir is not None else recordings_dir.resolve().parent / RERUN_FOLDER
     if folder.resolve() == recordings_dir.resolve():
-        raise L3MVNError(f"re-runs would be recorded among the eval's own recordings in {recordings_dir}: give "
-                         f"--record-dir another folder (or leave it out for {RERUN_FOLDER}/ beside them)")
+        raise L3MVNError(
+            f"re-runs would be recorded among the eval's own recordings in {recordings_dir}: give "
+            f"--record-dir another folder (or leave it out for {RERUN_FOLDER}/ beside them)"
+        )
     return folder

@@ -16,30 +16,36 @@ import math
 import queue
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from numbers import Real
 from pathlib import Path
-from typing import Callable
 
+from l3mvn.agent.modular.teleop import TeleopAgent
+from l3mvn.core.categories import GOAL_CATEGORIES
+from l3mvn.core.config import Config, config_hash
+from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS, HEAD_SCORER
+from l3mvn.core.errors import L3MVNError
+from l3mvn.core.types import Action, Pose
+from l3mvn.run.events import EventBus, StepEvent
+from l3mvn.run.recording.catalogue import DEFAULT_RECORD_DIR, unique_tag
+from l3mvn.run.registry import (
+    TELEOP,
+    check_policy,
+    keeps_map,
+    language_policies,
+    names_where,
+    reads_language,
+    scorer_of,
+)
+from l3mvn.run.runner import Runner
+from l3mvn.run.session import EpisodeSession, Steerable
+from l3mvn.run.viz import colorize_depth, colorize_semantic
+from l3mvn.world.datasets import EpisodeSet
+from l3mvn.world.episode import Episode
 from l3mvn_studio.map_image import agent_map_view, ground_truth_view
 from l3mvn_studio.model_weights import scorer_problems
 from l3mvn_studio.state import Cell, Frames, Metrics, Notice, Snapshot
-from l3mvn.core.config import Config, config_hash
-from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS, HEAD_SCORER
-from l3mvn.world.datasets import EpisodeSet
-from l3mvn.core.errors import L3MVNError
-from l3mvn.run.events import EventBus, StepEvent
-from l3mvn.run.recording.catalogue import DEFAULT_RECORD_DIR, unique_tag
-from l3mvn.agent.modular.teleop import TeleopAgent
-from l3mvn.run.registry import (
-    TELEOP, check_policy, keeps_map, language_policies, names_where, reads_language, scorer_of,
-)
-from l3mvn.core.categories import GOAL_CATEGORIES
-from l3mvn.run.runner import Runner
-from l3mvn.run.session import EpisodeSession, Steerable
-from l3mvn.core.types import Action, Pose
-from l3mvn.world.episode import Episode
-from l3mvn.run.viz import colorize_depth, colorize_semantic
 
 log = logging.getLogger(__name__)
 
@@ -53,8 +59,16 @@ FRAME_WIDTH = 320  # camera frames are shown at most this wide
 class DashboardController:
     """Shared state + worker thread. Methods are safe to call from any thread."""
 
-    def __init__(self, episodes: EpisodeSet, cfg: Config | None = None, *, policy: str = "oracle",
-                 seed: int = 0, steps_per_second: float = 4.0, record_dir: str | Path | None = None) -> None:
+    def __init__(
+        self,
+        episodes: EpisodeSet,
+        cfg: Config | None = None,
+        *,
+        policy: str = "oracle",
+        seed: int = 0,
+        steps_per_second: float = 4.0,
+        record_dir: str | Path | None = None,
+    ) -> None:
         if not episodes.episodes:
             raise L3MVNError(f"{episodes.name}/{episodes.split} has no episodes to show")
         self.episodes, self.cfg, self.seed = episodes, cfg or Config(), seed
@@ -85,9 +99,14 @@ class DashboardController:
         self._steps_pending = 0
         self._speed = _clamp_speed(steps_per_second)
         self._seq = 0
-        self._snapshot = Snapshot(seq=0, policy=self.policy_name, running=False,
-                                  steps_per_second=self._speed, metrics=Metrics(),
-                                  note="Pick an episode and press Reset.")
+        self._snapshot = Snapshot(
+            seq=0,
+            policy=self.policy_name,
+            running=False,
+            steps_per_second=self._speed,
+            metrics=Metrics(),
+            note="Pick an episode and press Reset.",
+        )
         self.unavailable_scorers = scorer_problems()
         self._snapshot_fns: list[Callable[[Snapshot], None]] = []
         self._notice_fns: list[Callable[[Notice], None]] = []
@@ -148,8 +167,7 @@ class DashboardController:
         return self._speed
 
     # --- commands (validate now, work on the worker) -----------------------------------------
-    def reset(self, scene_key: str, episode_id: int, *, client_id: int | None = None,
-              then_run: bool = False) -> None:
+    def reset(self, scene_key: str, episode_id: int, *, client_id: int | None = None, then_run: bool = False) -> None:
         """Start ``episode_id`` of ``scene_key`` on the worker; ``then_run`` queues a Run after it."""
         episode = self._find_episode(scene_key, episode_id)
         with self._lock:
@@ -163,8 +181,9 @@ class DashboardController:
             if self._session is None and not self._reset_pending:
                 raise L3MVNError("no episode yet: pick one and press Reset (or Run, which starts it)")
             if self._session is not None and isinstance(self._session.policy, TeleopAgent) and not self._reset_pending:
-                raise L3MVNError(f"Step does not apply to policy {TELEOP!r}: drive with the arrow keys / WASD "
-                                 "or the Drive buttons")
+                raise L3MVNError(
+                    f"Step does not apply to policy {TELEOP!r}: drive with the arrow keys / WASD or the Drive buttons"
+                )
             if self._running:
                 raise L3MVNError("Step is disabled while Run is active: press Pause first")
             if self._steps_pending >= MAX_QUEUED_STEPS:
@@ -176,8 +195,10 @@ class DashboardController:
         """One step with ``action`` chosen by hand (policy ``teleop`` only), queued like Step."""
         session = self._require_running_episode()
         if not isinstance(session.policy, TeleopAgent):
-            raise L3MVNError(f"Drive moves the agent under policy {TELEOP!r} only (the episode runs "
-                             f"{session.policy_name!r}): pick Policy {TELEOP} and press Reset")
+            raise L3MVNError(
+                f"Drive moves the agent under policy {TELEOP!r} only (the episode runs "
+                f"{session.policy_name!r}): pick Policy {TELEOP} and press Reset"
+            )
         chosen = Action.parse(action)
         with self._lock:
             if self._running:
@@ -202,8 +223,9 @@ class DashboardController:
             return
         session = self._require_running_episode()
         if isinstance(session.policy, TeleopAgent):
-            raise L3MVNError(f"Run does not apply to policy {TELEOP!r}: drive with the arrow keys / WASD or the "
-                             "Drive buttons")
+            raise L3MVNError(
+                f"Run does not apply to policy {TELEOP!r}: drive with the arrow keys / WASD or the Drive buttons"
+            )
         with self._lock:
             self._running = True
         self._publish(note="running")
@@ -240,8 +262,10 @@ class DashboardController:
         self.scorer = name
         session = self._session
         if session is None or not reads_language(session.policy_name):
-            self._notify(f"scorer {name!r} takes effect when a language policy runs "
-                         f"({', '.join(language_policies())})", client_id=client_id)
+            self._notify(
+                f"scorer {name!r} takes effect when a language policy runs ({', '.join(language_policies())})",
+                client_id=client_id,
+            )
             return
         self._submit("scorer", self._apply_scorer, client_id, busy=f"loading the language scorer {name!r}")
 
@@ -256,9 +280,12 @@ class DashboardController:
             self._notify(f"head {name!r} takes effect on the next Reset", client_id=client_id)
         else:
             scoring = f"scores with {scorer!r}" if scorer else "uses no language scorer"
-            self._notify(f"head {name!r} is kept but ignored by policy {self.policy_name!r}, which {scoring}: only "
-                         f"feed-forward scoring uses a head (policies {', '.join(self.headed_policies())}, "
-                         f"or Scorer {HEAD_SCORER})", client_id=client_id)
+            self._notify(
+                f"head {name!r} is kept but ignored by policy {self.policy_name!r}, which {scoring}: only "
+                f"feed-forward scoring uses a head (policies {', '.join(self.headed_policies())}, "
+                f"or Scorer {HEAD_SCORER})",
+                client_id=client_id,
+            )
         self._publish()  # every tab's Head dropdown follows
 
     def set_record(self, on: bool, *, client_id: int | None = None) -> None:
@@ -403,16 +430,20 @@ class DashboardController:
 
     @staticmethod
     def headed_policies() -> tuple[str, ...]:
-        return names_where(lambda spec: spec.language is not None and spec.same_as is None
-                           and spec.language.scorer == HEAD_SCORER)
+        return names_where(
+            lambda spec: spec.language is not None and spec.same_as is None and spec.language.scorer == HEAD_SCORER
+        )
 
     def _session_config(self, policy: str) -> Config:
         """The config a session of ``policy`` is built and hashed with: the Scorer choice for a language
         policy, and the Head only where that scorer reads one (a head elsewhere is refused or ignored)."""
         scorer = self._scorer_of(policy)
         p = self.cfg.policy
-        return self.cfg.replace(policy=replace(p, scorer=scorer if self.scorer else p.scorer,
-                                               head=p.head if scorer == HEAD_SCORER else None))
+        return self.cfg.replace(
+            policy=replace(
+                p, scorer=scorer if self.scorer else p.scorer, head=p.head if scorer == HEAD_SCORER else None
+            )
+        )
 
     def _runner_fits(self, cfg: Config, policy: str) -> bool:
         """Whether the warm runner builds ``policy`` as ``cfg`` says: its policies are cached by name, so
@@ -457,7 +488,9 @@ class DashboardController:
         session = self._require_running_episode()
         previous, old = self._segment_note, session.episode.goal
         # Set before the change: the new segment's first event is published inside change_target.
-        self._segment_note = f"segment {session.segment + 1}: target changed {old} -> {goal} at step {session.env.steps}"
+        self._segment_note = (
+            f"segment {session.segment + 1}: target changed {old} -> {goal} at step {session.env.steps}"
+        )
         try:
             session.change_target(goal)
         except Exception:
@@ -480,8 +513,9 @@ class DashboardController:
         episode many times, and the folder may hold an eval's recording of it (never replaced)."""
         from l3mvn.run.recording import Recorder
 
-        recorder = Recorder.for_episode(self.record_dir, self.episodes.name, episode, self.policy_name,
-                                        unique_tag("live")).attach(self.bus)
+        recorder = Recorder.for_episode(
+            self.record_dir, self.episodes.name, episode, self.policy_name, unique_tag("live")
+        ).attach(self.bus)
         self._recorder_off = recorder.close
 
     def _stop_recorder(self) -> None:
@@ -513,11 +547,23 @@ class DashboardController:
                 self._running = False  # this step's snapshot is the last: it must not say "running"
         if event.done and event.result is not None:
             metrics = metrics.add(event.result)
-            self._notify(_outcome(event), level="info" if event.result.get("success") else "warning", sticky=True,
-                         title="Episode over")
-        self._publish(event=event, frames=self._frames(event), map=view, metrics=metrics,
-                      episode_id=session.episode.episode_id, scene=session.task.scene.key,
-                      note="", error=None, stepped_at=stepped_at)
+            self._notify(
+                _outcome(event),
+                level="info" if event.result.get("success") else "warning",
+                sticky=True,
+                title="Episode over",
+            )
+        self._publish(
+            event=event,
+            frames=self._frames(event),
+            map=view,
+            metrics=metrics,
+            episode_id=session.episode.episode_id,
+            scene=session.task.scene.key,
+            note="",
+            error=None,
+            stepped_at=stepped_at,
+        )
 
     def _frames(self, event: StepEvent) -> Frames:
         obs = event.observation
@@ -533,10 +579,18 @@ class DashboardController:
             self._seq += 1
             # The policy of the episode shown (the dropdown's choice waits for the next Reset).
             policy = self._session.policy_name if self._session is not None else self.policy_name
-            snap = replace(self._snapshot, seq=self._seq, running=self._running, policy=policy,
-                           steps_per_second=self._speed, manual_goal=self._manual,
-                           segment_note=self._segment_note, busy="; ".join(self._busy.values()),
-                           run_queued=self._run_queued, **changes)
+            snap = replace(
+                self._snapshot,
+                seq=self._seq,
+                running=self._running,
+                policy=policy,
+                steps_per_second=self._speed,
+                manual_goal=self._manual,
+                segment_note=self._segment_note,
+                busy="; ".join(self._busy.values()),
+                run_queued=self._run_queued,
+                **changes,
+            )
             self._snapshot = snap
         for fn in list(self._snapshot_fns):
             try:
@@ -544,8 +598,9 @@ class DashboardController:
             except Exception:
                 log.exception("dashboard view failed on snapshot %d", snap.seq)
 
-    def _notify(self, text: str, *, level: str = "info", client_id: int | None = None, sticky: bool = False,
-                title: str = "") -> None:
+    def _notify(
+        self, text: str, *, level: str = "info", client_id: int | None = None, sticky: bool = False, title: str = ""
+    ) -> None:
         notice = Notice(text=text, level=level, client_id=client_id, sticky=sticky, title=title)
         for fn in list(self._notice_fns):
             try:
@@ -581,8 +636,9 @@ def check_speed(value: float) -> float:
     """``serve --speed``: a value out of range is refused, never clamped (a user who asked for 100
     steps per second must not silently get 60)."""
     if not (isinstance(value, Real) and not isinstance(value, bool) and MIN_SPEED <= value <= MAX_SPEED):
-        raise L3MVNError(f"--speed must be a number of steps per second from {MIN_SPEED:g} to {MAX_SPEED:g}, "
-                         f"got {value!r}")
+        raise L3MVNError(
+            f"--speed must be a number of steps per second from {MIN_SPEED:g} to {MAX_SPEED:g}, got {value!r}"
+        )
     return float(value)
 
 

@@ -10,8 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from l3mvn.run.events import StepEvent
 from l3mvn.agent.frontiers import Fusion
+from l3mvn.run.events import StepEvent
 
 Cell = tuple[int, int]
 
@@ -92,9 +92,12 @@ class Metrics:
     def spl(self) -> float:
         return self.spl_sum / self.episodes if self.episodes else 0.0
 
-    def add(self, result: dict) -> "Metrics":
-        return Metrics(self.episodes + 1, self.successes + int(bool(result.get("success"))),
-                       self.spl_sum + float(result.get("spl", 0.0)))
+    def add(self, result: dict) -> Metrics:
+        return Metrics(
+            self.episodes + 1,
+            self.successes + int(bool(result.get("success"))),
+            self.spl_sum + float(result.get("spl", 0.0)),
+        )
 
 
 @dataclass(frozen=True)

@@ -28,13 +28,20 @@ class TabNotices:
 
     def show(self, notice: Notice) -> None:
         clients = self._server.get_clients()
-        targets = [clients[notice.client_id]] if notice.client_id in clients else (
-            [] if notice.client_id is not None else list(clients.values()))
+        targets = (
+            [clients[notice.client_id]]
+            if notice.client_id in clients
+            else ([] if notice.client_id is not None else list(clients.values()))
+        )
         title = notice.title or _LEVEL_TITLES[notice.level]
         keep = notice.sticky or notice.level == "error"
         for client in targets:
-            client.add_notification(title, notice.text, auto_close_seconds=None if keep else NOTICE_SECONDS,
-                                    color=_LEVEL_COLORS[notice.level])
+            client.add_notification(
+                title,
+                notice.text,
+                auto_close_seconds=None if keep else NOTICE_SECONDS,
+                color=_LEVEL_COLORS[notice.level],
+            )
 
     def show_busy(self, text: str) -> None:
         """A spinner notice in every tab while the worker holds the controls; gone when ``text`` is empty.
@@ -52,6 +59,7 @@ class TabNotices:
             note = self._busy_notes.get(client_id)
             if note is None:
                 self._busy_notes[client_id] = client.add_notification(
-                    "Working", text, loading=True, with_close_button=False, auto_close_seconds=None)
+                    "Working", text, loading=True, with_close_button=False, auto_close_seconds=None
+                )
             elif note.body != text:
                 note.body = text

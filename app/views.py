@@ -56,36 +56,71 @@ log = logging.getLogger(__name__)
 # Run and Pause share a slot: the group offers the one that acts now (and Space presses it).
 BUTTONS_PAUSED = ("Reset", "Step", "Run")
 BUTTONS_RUNNING = ("Reset", "Step", "Pause")
-RENDER_NOTE = ("_Frames from the built-in CPU simulator: flat-shaded boxes, not photographs. "
-               "The agent sees exactly these._")
+RENDER_NOTE = (
+    "_Frames from the built-in CPU simulator: flat-shaded boxes, not photographs. The agent sees exactly these._"
+)
 # Policy teleop: button -> action; key_shortcuts' drive keys press the buttons (only while they are shown).
-DRIVE = {"Turn left": "turn_left", "Forward": "move_forward", "Turn right": "turn_right",
-         "Look up": "look_up", "Look down": "look_down", "Stop": "stop"}
+DRIVE = {
+    "Turn left": "turn_left",
+    "Forward": "move_forward",
+    "Turn right": "turn_right",
+    "Look up": "look_up",
+    "Look down": "look_down",
+    "Stop": "stop",
+}
 
 
 class DashboardView:
     """Builds the page once and keeps it in sync with the controller's snapshots."""
 
-    def __init__(self, server: viser.ViserServer, controller: DashboardController,
-                 results: ResultsSource | None = None, compare: EpisodeSource | None = None) -> None:
+    def __init__(
+        self,
+        server: viser.ViserServer,
+        controller: DashboardController,
+        results: ResultsSource | None = None,
+        compare: EpisodeSource | None = None,
+    ) -> None:
         self.server, self.ctl = server, controller
         self.notices = TabNotices(server)
         self._drawn: tuple = (None, None)  # (event, manual goal) the map was last drawn for
         self._frontier_cells: dict[str, Cell] = {}  # the Frontier dropdown's labels -> their cells
         self._build_gui()
-        self.compare = None if compare is None else ComparePanel(
-            server.gui, compare, config=controller.cfg, record_dir=controller.record_dir,
-            current_policy=controller.policy_name, selected_episode=self._selected_episode, on=self._on,
-            tell=self.notices.tell)
-        self.results = None if results is None else ResultsPanel(server.gui, results, on=self._on,
-                                                                 tell=self.notices.tell, compare=self.compare)
+        self.compare = (
+            None
+            if compare is None
+            else ComparePanel(
+                server.gui,
+                compare,
+                config=controller.cfg,
+                record_dir=controller.record_dir,
+                current_policy=controller.policy_name,
+                selected_episode=self._selected_episode,
+                on=self._on,
+                tell=self.notices.tell,
+            )
+        )
+        self.results = (
+            None
+            if results is None
+            else ResultsPanel(server.gui, results, on=self._on, tell=self.notices.tell, compare=self.compare)
+        )
         self.map_scene = MapScene(server)
         server.scene.on_click()(self._reported("map click", self._on_map_click))
-        panel_inputs = ((() if self.results is None else self.results.inputs)
-                        + (() if self.compare is None else self.compare.inputs)
-                        + self.recordings.inputs + self.history.inputs)
-        check_gui_updates(server, UpdateGate(server, (*vars(self).values(), *panel_inputs),
-                                             busy=lambda: controller.snapshot.busy, tell=self.notices.tell))
+        panel_inputs = (
+            (() if self.results is None else self.results.inputs)
+            + (() if self.compare is None else self.compare.inputs)
+            + self.recordings.inputs
+            + self.history.inputs
+        )
+        check_gui_updates(
+            server,
+            UpdateGate(
+                server,
+                (*vars(self).values(), *panel_inputs),
+                busy=lambda: controller.snapshot.busy,
+                tell=self.notices.tell,
+            ),
+        )
         ignore_client_messages_except(server, "GuiUpdateMessage", "ScenePointerMessage")  # controls, map clicks
         run_script_on_connect(server, SHORTCUTS_JS)
         self._draws = DrawLoop(self._draw, name="l3mvn-dashboard-view")
@@ -108,20 +143,33 @@ class DashboardView:
         with gui.add_folder("Episode"):
             self.scene = gui.add_dropdown("Scene", ctl.scene_keys)
             self.episode = gui.add_dropdown("Episode", self._episode_labels(ctl.scene_keys[0]))
-            self.target = gui.add_dropdown("Target", GOAL_CATEGORIES, initial_value=first.goal,
-                                           hint="the episode's goal; changing it mid-episode starts a new segment")
-            self.policy = gui.add_dropdown("Policy", policy_names(), initial_value=ctl.policy_name,
-                                           hint="takes effect on the next Reset")
-            self.scorer = gui.add_dropdown("Scorer", (DEFAULT_SCORER,) + ctl.scorer_names(),
-                                           hint="language policies only; 'policy default' restores theirs on Reset")
+            self.target = gui.add_dropdown(
+                "Target",
+                GOAL_CATEGORIES,
+                initial_value=first.goal,
+                hint="the episode's goal; changing it mid-episode starts a new segment",
+            )
+            self.policy = gui.add_dropdown(
+                "Policy", policy_names(), initial_value=ctl.policy_name, hint="takes effect on the next Reset"
+            )
+            self.scorer = gui.add_dropdown(
+                "Scorer",
+                (DEFAULT_SCORER,) + ctl.scorer_names(),
+                hint="language policies only; 'policy default' restores theirs on Reset",
+            )
             self.scorer_note = gui.add_markdown(unavailable_markdown(ctl.unavailable_scorers))
-            self.head = gui.add_dropdown("Head", ctl.head_names(), initial_value=ctl.head,
-                                         hint=f"feed-forward scoring only ({', '.join(ctl.headed_policies())} "
-                                              "or Scorer feedforward); other scorers ignore it; takes effect on "
-                                              "the next Reset")
+            self.head = gui.add_dropdown(
+                "Head",
+                ctl.head_names(),
+                initial_value=ctl.head,
+                hint=f"feed-forward scoring only ({', '.join(ctl.headed_policies())} "
+                "or Scorer feedforward); other scorers ignore it; takes effect on "
+                "the next Reset",
+            )
             self.controls = gui.add_button_group("Controls", BUTTONS_PAUSED)
-            self.speed = gui.add_slider("Steps / s", min=MIN_SPEED, max=MAX_SPEED, step=0.5,
-                                        initial_value=ctl.snapshot.steps_per_second)
+            self.speed = gui.add_slider(
+                "Steps / s", min=MIN_SPEED, max=MAX_SPEED, step=0.5, initial_value=ctl.snapshot.steps_per_second
+            )
             self.record = gui.add_checkbox("Record (.rrd)", False, hint="rerun recording of each new episode")
             gui.add_markdown(SHORTCUTS_MD)
         with gui.add_folder("Drive (policy teleop)", visible=ctl.policy_name == TELEOP) as self.drive_folder:
@@ -132,12 +180,13 @@ class DashboardView:
             self.status = gui.add_markdown("")
             self.metrics = gui.add_markdown("")
             self.fit = gui.add_button("Fit map in view")
-            self.auto_fit = gui.add_checkbox("Auto-fit map", True,
-                                             hint="refit the view whenever the map outgrows it")
+            self.auto_fit = gui.add_checkbox("Auto-fit map", True, hint="refit the view whenever the map outgrows it")
             self.ground_truth = gui.add_checkbox(
-                "Ground truth", False,
+                "Ground truth",
+                False,
                 hint="overlay what the agent does not know: the whole floor plan, the success region and "
-                     "the true goal instances (magenta)")
+                "the true goal instances (magenta)",
+            )
         with gui.add_folder("Camera"):
             blank = self._placeholder_frame()
             self.rgb = gui.add_image(blank, label="RGB")
@@ -151,8 +200,9 @@ class DashboardView:
         with gui.add_folder("Language"):
             self.language = gui.add_html(language_html(None, ctl.policy_name))
         self.history = HistoryPanel(gui, on=self._on, tell=self.notices.tell)
-        self.recordings = RecordingsPanel(gui, lambda: ctl.record_dir, self.server.get_host(), on=self._on,
-                                          tell=self.notices.tell)
+        self.recordings = RecordingsPanel(
+            gui, lambda: ctl.record_dir, self.server.get_host(), on=self._on, tell=self.notices.tell
+        )
         with gui.add_folder("Legend"):
             self.legend = gui.add_html(legend_html(legend(GOAL_CATEGORIES), target=first.goal))
         self._listed_episodes = 0
@@ -292,8 +342,10 @@ class DashboardView:
         elif button == "Run" and ctl.session is None and not ctl.snapshot.busy:
             # Nothing to run yet: start the selected episode, then run it (a press must never be lost).
             ctl.reset(self.scene.value, self._episode_id(self.episode.value), client_id=client_id, then_run=True)
-            self.notices.tell(client_id, f"no episode yet: starting episode {self.episode.value} of "
-                                         f"{self.scene.value}, then running it")
+            self.notices.tell(
+                client_id,
+                f"no episode yet: starting episode {self.episode.value} of {self.scene.value}, then running it",
+            )
         elif button == "Run":
             ctl.run(client_id=client_id)
         else:
@@ -304,8 +356,10 @@ class DashboardView:
         snap = self.ctl.snapshot
         try:
             if snap.event is None:
-                raise L3MVNError(f"Target changes the goal of a running episode; episode {self.episode.value} "
-                                 "looks for its own: press Reset (or Run) to start it")
+                raise L3MVNError(
+                    f"Target changes the goal of a running episode; episode {self.episode.value} "
+                    "looks for its own: press Reset (or Run) to start it"
+                )
             self.ctl.change_target(goal, client_id=client_id)
         except L3MVNError:
             self.target.value = snap.event.goal if snap.event is not None else self._selected_episode().goal
@@ -321,8 +375,11 @@ class DashboardView:
             if self.ctl.snapshot.map is None:
                 self.legend.content = legend_html(legend(GOAL_CATEGORIES), target=goal)
         else:
-            self.notices.tell(client_id, f"episode {self.episode.value} of {self.scene.value} is selected: Reset "
-                                         f"starts it ({event.episode_key} goes on until then)")
+            self.notices.tell(
+                client_id,
+                f"episode {self.episode.value} of {self.scene.value} is selected: Reset "
+                f"starts it ({event.episode_key} goes on until then)",
+            )
 
     def _on_map_click(self, event: viser.SceneClickEvent) -> None:
         problem = ray_refusal(event.ray_origin, event.ray_direction)
@@ -377,8 +434,9 @@ class DashboardView:
             self.rgb.image = snap.frames.rgb
             self.depth.image = snap.frames.depth
             self.semantic.image = snap.frames.semantic
-        self.map_scene.draw(snap, session=self.ctl.session, ground_truth=self.ground_truth.value,
-                            auto_fit=self.auto_fit.value)
+        self.map_scene.draw(
+            snap, session=self.ctl.session, ground_truth=self.ground_truth.value, auto_fit=self.auto_fit.value
+        )
         view = snap.map
         if view is not None:
             self._offer_frontiers(view)
@@ -412,8 +470,16 @@ class DashboardView:
         k = max(1, sim.frame_width // FRAME_WIDTH)
         h, w = -(-sim.frame_height // k), -(-sim.frame_width // k)
         img = np.full((h, w, 3), 48, np.uint8)
-        cv2.putText(img, "no frame yet: press Reset", (max(4, w // 2 - 100), h // 2), cv2.FONT_HERSHEY_SIMPLEX,
-                    0.45 * w / 320, (200, 200, 200), 1, cv2.LINE_AA)
+        cv2.putText(
+            img,
+            "no frame yet: press Reset",
+            (max(4, w // 2 - 100), h // 2),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.45 * w / 320,
+            (200, 200, 200),
+            1,
+            cv2.LINE_AA,
+        )
         return img
 
     @staticmethod

@@ -12,13 +12,14 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from types import SimpleNamespace
-from typing import Any, Callable
+from typing import Any
 
 import viser
 import websockets.asyncio.server
-from viser.infra import _infra
 from viser._messages import GuiUpdateMessage, RunJavascriptMessage
+from viser.infra import _infra
 from websockets.asyncio.server import ServerConnection
 from websockets.http11 import Request, Response
 
@@ -35,8 +36,9 @@ UpdateCheck = Callable[[int, str, dict[str, Any]], bool]
 _serve_lock = threading.Lock()
 
 
-def start_checked_server(check: RequestCheck, *, host: str = "0.0.0.0", port: int = 8080,
-                         **viser_args: Any) -> viser.ViserServer:
+def start_checked_server(
+    check: RequestCheck, *, host: str = "0.0.0.0", port: int = 8080, **viser_args: Any
+) -> viser.ViserServer:
     """``viser.ViserServer(host=host, port=port, **viser_args)``, with ``check`` run on every HTTP request
     and websocket handshake, on exactly ``host:port``: L3MVNError (one line) if that cannot be bound.
 
@@ -79,9 +81,11 @@ def start_checked_server(check: RequestCheck, *, host: str = "0.0.0.0", port: in
     server.stop()
     if failure is not None:
         raise L3MVNError(bind_failure(host, port, failure))
-    raise L3MVNError(f"viser {viser.__version__} no longer starts its server through "
-                     "websockets.asyncio.server.serve, so the dashboard cannot check Origin headers; "
-                     "refusing to serve (see app/viser_hooks.py)")
+    raise L3MVNError(
+        f"viser {viser.__version__} no longer starts its server through "
+        "websockets.asyncio.server.serve, so the dashboard cannot check Origin headers; "
+        "refusing to serve (see app/viser_hooks.py)"
+    )
 
 
 class _Bind:
@@ -117,8 +121,7 @@ class _NotListening:
 def _refusal(check: RequestCheck, connection: ServerConnection, request: Request) -> str | None:
     """``check`` on one request; a check that raises refuses (fail closed) and is logged."""
     try:
-        return check(request.headers.get_all("Origin"), request.headers.get_all("Host"),
-                     connection.local_address[1])
+        return check(request.headers.get_all("Origin"), request.headers.get_all("Host"), connection.local_address[1])
     except Exception:
         log.exception("dashboard: checking a request failed; refusing it")
         return "refused: the server could not check this request (see its log)"
@@ -158,8 +161,9 @@ def ignore_client_messages_except(server: viser.ViserServer, *kept: str) -> None
     websock = server._websock_server
     missing = set(kept) - {message_type.__name__ for message_type in websock._incoming_handlers}
     if missing:
-        raise L3MVNError(f"viser {viser.__version__} no longer handles {', '.join(sorted(missing))} "
-                         "(see app/viser_hooks.py)")
+        raise L3MVNError(
+            f"viser {viser.__version__} no longer handles {', '.join(sorted(missing))} (see app/viser_hooks.py)"
+        )
     for message_type in list(websock._incoming_handlers):
         if message_type.__name__ not in kept:
             websock.unregister_handler(message_type)
@@ -178,8 +182,10 @@ def drop_malformed_frames() -> None:
     if _infra._message_consumer is _tolerant_consumer:
         return
     if getattr(_infra._message_consumer, "__name__", "") != "_message_consumer":
-        raise L3MVNError(f"viser {viser.__version__} no longer receives frames through "
-                         "viser.infra._infra._message_consumer (see app/viser_hooks.py)")
+        raise L3MVNError(
+            f"viser {viser.__version__} no longer receives frames through "
+            "viser.infra._infra._message_consumer (see app/viser_hooks.py)"
+        )
     _infra._message_consumer = _tolerant_consumer
 
 
@@ -213,8 +219,9 @@ def _fault_line(fault: BaseException) -> str:
     return f"{type(fault).__name__}: {text[:160]}"
 
 
-async def _tolerant_consumer(websocket: ServerConnection, handle_message: Callable[[Any], None],
-                             message_class: type) -> None:
+async def _tolerant_consumer(
+    websocket: ServerConnection, handle_message: Callable[[Any], None], message_class: type
+) -> None:
     while True:
         raw = await websocket.recv()
         try:

@@ -29,8 +29,10 @@ def main() -> None:
     with mp.get_context("spawn").Pool(args.copies) as pool:
         together = pool.starmap(kernel, [()] * args.copies)
     ceiling = args.copies * alone / max(together)
-    print(f"alone {alone:.2f} s; {args.copies} at once: {', '.join(f'{t:.2f}' for t in together)} s; "
-          f"throughput ceiling {ceiling:.2f}x (ideal {args.copies}x)")
+    print(
+        f"alone {alone:.2f} s; {args.copies} at once: {', '.join(f'{t:.2f}' for t in together)} s; "
+        f"throughput ceiling {ceiling:.2f}x (ideal {args.copies}x)"
+    )
 
 
 if __name__ == "__main__":

@@ -24,11 +24,18 @@ import time
 
 from playwright.sync_api import sync_playwright
 
-from l3mvn_studio.server import start_dashboard
 from l3mvn.core.config import Config
+from l3mvn_studio.server import start_dashboard
 
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run"]
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
 
 
 SEEN_STEPS = """
@@ -62,8 +69,12 @@ def main() -> None:
     ap.add_argument("--policy", default="frontier")
     ap.add_argument("--gap", type=float, default=0.4, help="seconds between steps")
     ap.add_argument("--compare", action="store_true", help="run a comparison in the page's Compare view first")
-    ap.add_argument("--compare-max-steps", type=int, default=120,
-                    help="with --compare: sim.max_steps of the dashboard (caps the two compared episodes)")
+    ap.add_argument(
+        "--compare-max-steps",
+        type=int,
+        default=120,
+        help="with --compare: sim.max_steps of the dashboard (caps the two compared episodes)",
+    )
     args = ap.parse_args()
 
     cfg = Config()
@@ -101,9 +112,12 @@ def main() -> None:
     if not latencies:
         raise SystemExit("no map updates reached the browser")
     latencies.sort()
-    print(f"policy {args.policy}{', compare view open' if args.compare else ''}, {len(latencies)}/{len(stamps)} steps matched: step end -> map in browser "
-          f"median {statistics.median(latencies):.1f} ms, p90 {latencies[int(0.9 * (len(latencies) - 1))]:.1f} ms, "
-          f"max {latencies[-1]:.1f} ms")
+    print(
+        f"policy {args.policy}{', compare view open' if args.compare else ''}, "
+        f"{len(latencies)}/{len(stamps)} steps matched: step end -> map in browser "
+        f"median {statistics.median(latencies):.1f} ms, p90 {latencies[int(0.9 * (len(latencies) - 1))]:.1f} ms, "
+        f"max {latencies[-1]:.1f} ms"
+    )
 
 
 if __name__ == "__main__":

@@ -34,13 +34,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from l3mvn.core.config import Config, PolicyConfig  # noqa: E402
-from l3mvn.world.datasets import load_episode_set  # noqa: E402
 from l3mvn.agent.language import GOALS  # noqa: E402
 from l3mvn.agent.language.frontier_head import house_split  # noqa: E402
-from l3mvn.run.registry import make_policy  # noqa: E402
 from l3mvn.agent.policies.oracle_frontier import frontier_goal_distances  # noqa: E402
+from l3mvn.core.config import Config, PolicyConfig  # noqa: E402
+from l3mvn.run.registry import make_policy  # noqa: E402
 from l3mvn.run.runner import Runner  # noqa: E402
+from l3mvn.world.datasets import load_episode_set  # noqa: E402
 
 # (label, policy name, options): the paper's policies and its Table II ablations.
 CANDIDATES = [
@@ -71,8 +71,10 @@ def _episode(args: tuple[str | None, str, int, str]) -> list[tuple[str, str, flo
     ep = eset.episodes[index]
     runner = Runner(cfg, config_hash="bench")
     floor = runner.floor(eset.scene_of(ep))
-    candidates = [(label, make_policy(name, floor.env, floor.task, cfg.replace(policy=opts)).global_policy)
-                  for label, name, opts in CANDIDATES]
+    candidates = [
+        (label, make_policy(name, floor.env, floor.task, cfg.replace(policy=opts)).global_policy)
+        for label, name, opts in CANDIDATES
+    ]
     session = runner.session(eset.scene_of(ep), behaviour)
     session.start(ep)
     region, rng = floor.task.region(ep.goal), np.random.default_rng(0)
@@ -83,7 +85,9 @@ def _episode(args: tuple[str | None, str, int, str]) -> list[tuple[str, str, flo
         if not frontiers or len(frontiers) < 2 or frontiers is last or decision.goal_kind != "frontier":
             continue
         last = frontiers
-        total = np.array([f.cost for f in frontiers]) + frontier_goal_distances(frontiers, decision.map, region.distances_at)
+        total = np.array([f.cost for f in frontiers]) + frontier_goal_distances(
+            frontiers, decision.map, region.distances_at
+        )
         if not np.isfinite(total).any():
             continue
         best = total.min()
@@ -105,8 +109,12 @@ def main() -> None:
     parser.add_argument("--behaviour", default="cost-utility", help="policy that walks the episodes")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--limit", type=int, default=None, help="first N episodes only")
-    parser.add_argument("--houses", nargs="+", default=None,
-                        help="only these houses; 'held-out': the test side of the frontier head's house split")
+    parser.add_argument(
+        "--houses",
+        nargs="+",
+        default=None,
+        help="only these houses; 'held-out': the test side of the frontier head's house split",
+    )
     parser.add_argument("--json", action="store_true", help="print the table as one JSON line too")
     args = parser.parse_args()
     eset = load_episode_set(args.dataset, args.split, cfg=Config().with_frame(120, 160))
@@ -131,8 +139,10 @@ def main() -> None:
                 regret[label]["all"].append(r)
                 changed[label].append(differs)
     goals = ["all"] + [g for g in GOALS if regret["cost-utility"][g]]
-    print(f"{n} episodes in {len(houses)} houses ({', '.join(houses)}), {len(regret['cost-utility']['all'])} "
-          "re-selections; mean regret (m) of each choice")
+    print(
+        f"{n} episodes in {len(houses)} houses ({', '.join(houses)}), {len(regret['cost-utility']['all'])} "
+        "re-selections; mean regret (m) of each choice"
+    )
     print("| policy | " + " | ".join(goals) + " | differs from cost-utility |")
     print("|---" * (len(goals) + 2) + "|")
     table = {}

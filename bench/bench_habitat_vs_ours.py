@@ -19,12 +19,12 @@ from pathlib import Path
 import numpy as np
 
 from l3mvn.core.config import Config, SimConfig, TaskConfig
-from l3mvn.world.datasets import load_episode_set
-from l3mvn.world.datasets.objectnav import dataset_rule
 from l3mvn.run.registry import make_policy
 from l3mvn.run.runner import Runner
-from l3mvn.world.scenes.categories import RAW_NAMES
 from l3mvn.run.session import EpisodeSession
+from l3mvn.world.datasets import load_episode_set
+from l3mvn.world.datasets.objectnav import dataset_rule
+from l3mvn.world.scenes.categories import RAW_NAMES
 from l3mvn.world.sim.habitat_bridge import habitat_environment
 from l3mvn.world.task import ObjectNavTask
 
@@ -48,8 +48,10 @@ def main() -> None:
     args = parser.parse_args()
     ours_root, hab_root = args.export.resolve(), (args.habitat_export or args.export).resolve()
     dataset = ours_root / "objectnav_hm3d_v2"
-    config = Config(sim=SimConfig(frame_height=args.size[0], frame_width=args.size[1]),
-                    task=TaskConfig(success_rule=dataset_rule(dataset, SPLIT)))
+    config = Config(
+        sim=SimConfig(frame_height=args.size[0], frame_width=args.size[1]),
+        task=TaskConfig(success_rule=dataset_rule(dataset, SPLIT)),
+    )
     eset = load_episode_set(dataset, SPLIT, scenes_dir=ours_root / "scene_datasets", cfg=config)
     dataset_config = str(next((hab_root / "scene_datasets").rglob("*.scene_dataset_config.json")))
     runner, envs, rows = Runner(config), {}, []
@@ -57,8 +59,14 @@ def main() -> None:
         floor = eset.scene_of(episode)
         if floor.key not in envs:
             stage = str(floor.source).replace(str(ours_root), str(hab_root))
-            envs[floor.key] = habitat_environment(args.habitat_python, floor, stage, config.sim,
-                                                  category_map=RAW_NAMES, scene_dataset_config=dataset_config)
+            envs[floor.key] = habitat_environment(
+                args.habitat_python,
+                floor,
+                stage,
+                config.sim,
+                category_map=RAW_NAMES,
+                scene_dataset_config=dataset_config,
+            )
         env, ref, task = envs[floor.key], runner.floor(floor).env, ObjectNavTask(floor, config)
         first, mine = env.reset(episode), ref.reset(episode)
         both = (first.depth > 0) & (mine.depth > 0)
@@ -68,28 +76,47 @@ def main() -> None:
 
             args.frames.mkdir(parents=True, exist_ok=True)
             Image.fromarray(np.concatenate([_picture(first), _picture(mine)], axis=1)).save(
-                args.frames / f"episode{i}_habitat_vs_ours.png")
+                args.frames / f"episode{i}_habitat_vs_ours.png"
+            )
         t0 = time.perf_counter()
         want = runner.run(floor, episode, "oracle")
         t1 = time.perf_counter()
-        session = EpisodeSession(env, task, make_policy("oracle", env, task, config), policy_name="oracle",
-                                 config_hash="")
+        session = EpisodeSession(
+            env, task, make_policy("oracle", env, task, config), policy_name="oracle", config_hash=""
+        )
         session.start(episode)
         got = session.run()
         t2 = time.perf_counter()
         points = [tuple(p) for p in floor.view_points.get(episode.goal, [])]
         error = np.abs(first.depth - mine.depth)[both]
         row = {
-            "episode": episode.key, "goal": episode.goal, "file_geodesic_m": episode.geodesic_distance_m,
+            "episode": episode.key,
+            "goal": episode.goal,
+            "file_geodesic_m": episode.geodesic_distance_m,
             "habitat_geodesic_m": round(env.geodesic_distance(episode.start, points), 3) if points else None,
-            "ours": {"success": want.success, "spl": round(want.spl, 3), "path_m": round(want.path_length_m, 3),
-                     "steps": want.steps, "failure": want.failure, "seconds": round(t1 - t0, 1)},
-            "habitat": {"success": got.success, "spl": round(got.spl, 3), "path_m": round(got.path_length_m, 3),
-                        "steps": got.steps, "failure": got.failure, "seconds": round(t2 - t1, 1)},
-            "first_frame": {"depth_median_abs_m": round(float(np.median(error)), 4),
-                            "depth_p90_abs_m": round(float(np.percentile(error, 90)), 4),
-                            "labels_agree": round(float((first.semantic == mine.semantic)[labelled].mean()), 3)
-                            if labelled.any() else None},
+            "ours": {
+                "success": want.success,
+                "spl": round(want.spl, 3),
+                "path_m": round(want.path_length_m, 3),
+                "steps": want.steps,
+                "failure": want.failure,
+                "seconds": round(t1 - t0, 1),
+            },
+            "habitat": {
+                "success": got.success,
+                "spl": round(got.spl, 3),
+                "path_m": round(got.path_length_m, 3),
+                "steps": got.steps,
+                "failure": got.failure,
+                "seconds": round(t2 - t1, 1),
+            },
+            "first_frame": {
+                "depth_median_abs_m": round(float(np.median(error)), 4),
+                "depth_p90_abs_m": round(float(np.percentile(error, 90)), 4),
+                "labels_agree": round(float((first.semantic == mine.semantic)[labelled].mean()), 3)
+                if labelled.any()
+                else None,
+            },
         }
         rows.append(row)
         print(json.dumps(row))
@@ -97,11 +124,19 @@ def main() -> None:
         env.close()
     same = [r for r in rows if r["ours"]["success"] == r["habitat"]["success"]]
     ratios = [r["habitat"]["path_m"] / r["ours"]["path_m"] for r in same if r["ours"]["path_m"] > 0]
-    print(json.dumps({"episodes": len(rows), "format": eset.format, "rule": config.task.success_rule,
-                      "sr_ours": float(np.mean([r["ours"]["success"] for r in rows])),
-                      "sr_habitat": float(np.mean([r["habitat"]["success"] for r in rows])),
-                      "same_outcome": len(same),
-                      "path_ratio_same_outcome": [round(min(ratios), 3), round(max(ratios), 3)] if ratios else None}))
+    print(
+        json.dumps(
+            {
+                "episodes": len(rows),
+                "format": eset.format,
+                "rule": config.task.success_rule,
+                "sr_ours": float(np.mean([r["ours"]["success"] for r in rows])),
+                "sr_habitat": float(np.mean([r["habitat"]["success"] for r in rows])),
+                "same_outcome": len(same),
+                "path_ratio_same_outcome": [round(min(ratios), 3), round(max(ratios), 3)] if ratios else None,
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

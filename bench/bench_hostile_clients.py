@@ -27,10 +27,22 @@ import viser
 from websockets.sync.client import connect
 
 REPO = Path(__file__).resolve().parents[1]
-GARBAGE = (b"\xc1 not msgpack", msgspec.msgpack.encode({"type": "NoSuchMessage"}),
-           msgspec.msgpack.encode({"type": "GuiUpdateMessage"}), msgspec.msgpack.encode([1, 2, 3]),
-           msgspec.msgpack.encode({"type": "ScenePointerMessage", "event_type": "click", "ray_origin": [1e308, 0, 5],
-                                   "ray_direction": [0, 0, -1], "screen_pos": [[0.5, 0.5]], "modifier": None}))
+GARBAGE = (
+    b"\xc1 not msgpack",
+    msgspec.msgpack.encode({"type": "NoSuchMessage"}),
+    msgspec.msgpack.encode({"type": "GuiUpdateMessage"}),
+    msgspec.msgpack.encode([1, 2, 3]),
+    msgspec.msgpack.encode(
+        {
+            "type": "ScenePointerMessage",
+            "event_type": "click",
+            "ray_origin": [1e308, 0, 5],
+            "ray_direction": [0, 0, -1],
+            "screen_pos": [[0.5, 0.5]],
+            "modifier": None,
+        }
+    ),
+)
 
 
 def _port() -> int:
@@ -50,8 +62,14 @@ def _hostile(url: str, stop: float, sent: list[int]) -> None:
     protocol = f"viser-v{viser.__version__}"
     while time.monotonic() < stop:
         try:
-            with connect(url, origin=url.replace("ws", "http", 1), subprotocols=[protocol], max_size=None,
-                         open_timeout=10, ping_interval=None) as ws:  # a hostile client answers nothing
+            with connect(
+                url,
+                origin=url.replace("ws", "http", 1),
+                subprotocols=[protocol],
+                max_size=None,
+                open_timeout=10,
+                ping_interval=None,
+            ) as ws:  # a hostile client answers nothing
                 while time.monotonic() < stop:
                     for frame in GARBAGE:
                         ws.send(frame)
@@ -70,9 +88,28 @@ def main() -> int:
     port = _port()
     log = Path(f"/tmp/l3mvn-hostile-{port}.log")
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
-    server = subprocess.Popen([sys.executable, "-m", "l3mvn_studio.cli", "serve", "--port", str(port), "--policy", "frontier",
-                               "--houses", "1", "--episodes-per-house", "2", "--speed", "20"],
-                              cwd=REPO, env=env, stdout=log.open("w"), stderr=subprocess.STDOUT)
+    server = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "l3mvn_studio.cli",
+            "serve",
+            "--port",
+            str(port),
+            "--policy",
+            "frontier",
+            "--houses",
+            "1",
+            "--episodes-per-house",
+            "2",
+            "--speed",
+            "20",
+        ],
+        cwd=REPO,
+        env=env,
+        stdout=log.open("w"),
+        stderr=subprocess.STDOUT,
+    )
     try:
         url = f"ws://127.0.0.1:{port}"
         deadline = time.monotonic() + 120
@@ -90,16 +127,25 @@ def main() -> int:
         last = _rss_mb(server.pid)
         text = log.read_text(errors="replace")
         alive = server.poll() is None
-        with connect(url, origin=f"http://127.0.0.1:{port}", subprotocols=[f"viser-v{viser.__version__}"],
-                     max_size=None, open_timeout=10) as ws:
+        with connect(
+            url,
+            origin=f"http://127.0.0.1:{port}",
+            subprotocols=[f"viser-v{viser.__version__}"],
+            max_size=None,
+            open_timeout=10,
+        ) as ws:
             fresh = bool(ws.recv(timeout=10))
         dropped = len(re.findall("dropped a frame a page sent", text))
         print(f"clients {args.clients}, {args.seconds:.0f} s, frames sent {sent[0]}")
         print(f"server alive {alive}, a fresh tab gets the page {fresh}")
-        print(f"RSS after {min(60.0, args.seconds / 2):.0f} s {first:.0f} MB, at the end {last:.0f} MB "
-              f"({(last / first - 1) * 100:+.1f}%)")
-        print(f"log lines for dropped frames {dropped} ({dropped / args.seconds:.1f}/s), tracebacks "
-              f"{text.count('Traceback')}")
+        print(
+            f"RSS after {min(60.0, args.seconds / 2):.0f} s {first:.0f} MB, at the end {last:.0f} MB "
+            f"({(last / first - 1) * 100:+.1f}%)"
+        )
+        print(
+            f"log lines for dropped frames {dropped} ({dropped / args.seconds:.1f}/s), tracebacks "
+            f"{text.count('Traceback')}"
+        )
     finally:
         server.terminate()
         server.wait(timeout=30)

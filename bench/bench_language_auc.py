@@ -23,8 +23,8 @@ from scipy.stats import rankdata
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from l3mvn.core.errors import L3MVNError  # noqa: E402
 from l3mvn.agent.language import GOALS, Room, load_rooms, load_stats, make_scorer, rooms_in  # noqa: E402
+from l3mvn.core.errors import L3MVNError  # noqa: E402
 
 
 def auc(scores: np.ndarray, positive: np.ndarray) -> float:
@@ -88,8 +88,10 @@ def main(argv: list[str] | None = None) -> int:
     rooms = load_rooms()
     held_out, train = rooms_in(rooms, args.split), rooms_in(rooms, "train")
     stats = load_stats()
-    print(f"{len(held_out)} rooms of {len({r.building for r in held_out})} held-out buildings ({args.split}); "
-          f"naive Bayes fitted on {len(train)} train rooms; informative list: {', '.join(stats.informative)}\n")
+    print(
+        f"{len(held_out)} rooms of {len({r.building for r in held_out})} held-out buildings ({args.split}); "
+        f"naive Bayes fitted on {len(train)} train rooms; informative list: {', '.join(stats.informative)}\n"
+    )
     cases = {g: goal_cases(held_out, g) for g in GOALS}
     counts = [f"{int(y.sum())}/{len(y)}" for _, y in cases.values()]
     rows: dict[str, list[float]] = {}
@@ -107,7 +109,9 @@ def main(argv: list[str] | None = None) -> int:
                 options["model"] = args.mlm_model
             if name == "causal":
                 options["model"] = args.causal_model
-            if name == "feedforward":  # room membership is what the room-list head predicts; the frontier head predicts metres
+            if (
+                name == "feedforward"
+            ):  # room membership is what the room-list head predicts; the frontier head predicts metres
                 options["head"] = "rooms"
             try:
                 scorer = make_scorer(name, **options)

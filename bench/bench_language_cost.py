@@ -16,11 +16,11 @@ import time
 import numpy as np
 import torch
 
-from l3mvn.core.config import Config
-from l3mvn.world.datasets import load_episode_set
-from l3mvn.run.events import EventBus
 from l3mvn.agent.policies.language_policy import shared_scorer
+from l3mvn.core.config import Config
+from l3mvn.run.events import EventBus
 from l3mvn.run.runner import Runner
+from l3mvn.world.datasets import load_episode_set
 
 
 def run(policy: str, eset, cfg: Config, episodes) -> dict:
@@ -29,8 +29,13 @@ def run(policy: str, eset, cfg: Config, episodes) -> dict:
     runner = Runner(cfg, config_hash="bench")
     for ep in episodes:
         bus = EventBus()
-        bus.subscribe(lambda ev: [stages.setdefault(k, []).append(v) for k, v in ev.decision.timings_ms.items()]
-                      if ev.decision is not None else None)
+        bus.subscribe(
+            lambda ev: (
+                [stages.setdefault(k, []).append(v) for k, v in ev.decision.timings_ms.items()]
+                if ev.decision is not None
+                else None
+            )
+        )
         session = runner.session(eset.scene_of(ep), policy, bus)
         session.start(ep)
         while not session.done:
@@ -71,7 +76,11 @@ def main() -> None:
         lang = r["agent_ms"].get("policy", 0.0)
         adds = lang / max(r["step_ms"] - lang, 1e-9)
         cache = r.get("cache")
-        hits = f"{cache.hits / max(cache.hits + cache.misses, 1):.1%} ({cache.hits}/{cache.hits + cache.misses})" if cache else "-"
+        hits = (
+            f"{cache.hits / max(cache.hits + cache.misses, 1):.1%} ({cache.hits}/{cache.hits + cache.misses})"
+            if cache
+            else "-"
+        )
         print(f"| {policy} | {r['steps']} | {r['step_ms']:.1f} | {lang:.2f} | {adds:+.1%} | {hits} |")
 
 

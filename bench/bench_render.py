@@ -15,14 +15,14 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage as ndi
 
+from l3mvn.core.categories import GIBSON_CATEGORIES
 from l3mvn.core.config import SimConfig
 from l3mvn.core.grid import disk
-from l3mvn.core.categories import GIBSON_CATEGORIES
+from l3mvn.core.types import Action, Pose
+from l3mvn.world.episode import Episode
 from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.sim.render import Renderer
 from l3mvn.world.sim.simulator import BuiltinSimulator
-from l3mvn.core.types import Action, Pose
-from l3mvn.world.episode import Episode
 from l3mvn.world.sim.world import build_world
 
 SIZES = ((120, 160), (480, 640))
@@ -41,16 +41,24 @@ def synthetic_house() -> SceneMap:
     free[94:106, 40:60] = True  # and between the rows
     objects = np.zeros((len(GIBSON_CATEGORIES), h, w), bool)
     layout = {
-        "bed": (10, 50, 10, 50), "chair": (120, 130, 120, 130), "couch": (110, 125, 220, 280),
-        "toilet": (10, 22, 280, 290), "dining-table": (150, 170, 130, 170), "refrigerator": (180, 195, 10, 25),
-        "tv": (104, 108, 240, 270), "potted plant": (80, 86, 180, 186),
+        "bed": (10, 50, 10, 50),
+        "chair": (120, 130, 120, 130),
+        "couch": (110, 125, 220, 280),
+        "toilet": (10, 22, 280, 290),
+        "dining-table": (150, 170, 130, 170),
+        "refrigerator": (180, 195, 10, 25),
+        "tv": (104, 108, 240, 270),
+        "potted plant": (80, 86, 180, 186),
     }
     for name, (r0, r1, c0, c1) in layout.items():
         objects[GIBSON_CATEGORIES.index(name), r0:r1, c0:c1] = True
     free &= ~objects.any(0)
     return SceneMap(
-        name="Synthetic", floor=0, categories=GIBSON_CATEGORIES,
-        navigable=ndi.binary_erosion(free, disk(4)), objects=objects,
+        name="Synthetic",
+        floor=0,
+        categories=GIBSON_CATEGORIES,
+        navigable=ndi.binary_erosion(free, disk(4)),
+        objects=objects,
     )
 
 
@@ -71,8 +79,12 @@ def bench_scene(scene: SceneMap, cfg: SimConfig, frames: int, rng: np.random.Gen
     renderer = Renderer(world, cfg)
     renderer.render(Pose(0.0, 0.0, 0.0), 0.0, 8, 8)  # compile / load the jitted kernels
     cells = np.argwhere(scene.walkable)
-    row = {"scene": scene.key, "grid": f"{scene.shape[0]}x{scene.shape[1]}", "triangles": world.num_triangles,
-           "build_s": build_s}
+    row = {
+        "scene": scene.key,
+        "grid": f"{scene.shape[0]}x{scene.shape[1]}",
+        "triangles": world.num_triangles,
+        "build_s": build_s,
+    }
     for h, w in SIZES:
         times = []
         for _ in range(frames):
@@ -107,7 +119,9 @@ def env_steps_per_second(scene: SceneMap, cfg: SimConfig, steps: int, rng: np.ra
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dataset", type=Path, default=Path(__file__).resolve().parents[2] / "shared/data/gibson_semexp")
+    parser.add_argument(
+        "--dataset", type=Path, default=Path(__file__).resolve().parents[2] / "shared/data/gibson_semexp"
+    )
     parser.add_argument("--split", default="train")
     parser.add_argument("--scenes", nargs="*", default=list(DEFAULT_SCENES))
     parser.add_argument("--frames", type=int, default=50)
@@ -117,8 +131,13 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     rows = [bench_scene(s, cfg, args.frames, rng) for s in load_scenes(args.dataset, args.split, tuple(args.scenes))]
     sizes = [f"{h}x{w}" for h, w in SIZES]
-    print("| scene | grid | triangles | build s | " + " | ".join(f"{s} median / p90 ms" for s in sizes)
-          + " | " + " | ".join(f"env steps/s {s}" for s in sizes) + " |")
+    print(
+        "| scene | grid | triangles | build s | "
+        + " | ".join(f"{s} median / p90 ms" for s in sizes)
+        + " | "
+        + " | ".join(f"env steps/s {s}" for s in sizes)
+        + " |"
+    )
     print("|---|---|---:|---:|" + "---:|" * (2 * len(sizes)))
     for row in rows:
         cells = " | ".join(f"{row[s][0]:.1f} / {row[s][1]:.1f}" for s in sizes)

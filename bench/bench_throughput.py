@@ -87,15 +87,36 @@ def measure(job: EvalJob, keys: list[str], backend: str, workers: int) -> Run:
 def table(runs: list[Run]) -> str:
     base = {r.policy: r for r in runs if r.backend == "local" and r.workers == 1}
     stages = sorted({s for r in runs for s in r.per_step_ms()})
-    head = ["policy", "backend", "workers", "episodes", "steps", "wall s", "first row s", "steps/s", "episodes/h",
-            "speed-up", "peak RSS/worker MB"] + [f"{s} ms/step" for s in stages]
+    head = [
+        "policy",
+        "backend",
+        "workers",
+        "episodes",
+        "steps",
+        "wall s",
+        "first row s",
+        "steps/s",
+        "episodes/h",
+        "speed-up",
+        "peak RSS/worker MB",
+    ] + [f"{s} ms/step" for s in stages]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in runs:
         b = base.get(r.policy)
         ms = r.per_step_ms()
-        cells = [r.policy, r.backend, str(r.workers), str(len(r.ok)), str(r.steps), f"{r.wall_s:.1f}",
-                 f"{r.first_row_s:.1f}", f"{r.steps / r.wall_s:.0f}", f"{len(r.ok) / r.wall_s * 3600:.0f}",
-                 f"{b.wall_s / r.wall_s:.2f}" if b else "-", f"{r.peak_rss_mb():.0f}"]
+        cells = [
+            r.policy,
+            r.backend,
+            str(r.workers),
+            str(len(r.ok)),
+            str(r.steps),
+            f"{r.wall_s:.1f}",
+            f"{r.first_row_s:.1f}",
+            f"{r.steps / r.wall_s:.0f}",
+            f"{len(r.ok) / r.wall_s * 3600:.0f}",
+            f"{b.wall_s / r.wall_s:.2f}" if b else "-",
+            f"{r.peak_rss_mb():.0f}",
+        ]
         cells += [f"{ms[s]:.2f}" if s in ms else "-" for s in stages]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
@@ -116,8 +137,9 @@ def plot(runs: list[Run], path: Path, title: str) -> None:
         series[(r.policy, r.backend)].append(r)
     for (policy, backend), rs in sorted(series.items()):
         rs.sort(key=lambda r: r.workers)
-        ax.plot([r.workers for r in rs], [base[policy].wall_s / r.wall_s for r in rs], "o-",
-                label=f"{policy} / {backend}")
+        ax.plot(
+            [r.workers for r in rs], [base[policy].wall_s / r.wall_s for r in rs], "o-", label=f"{policy} / {backend}"
+        )
     ax.set_xlabel("workers")
     ax.set_ylabel("speed-up over 1 in-process worker (end to end)")
     ax.set_title(title, fontsize=9)
@@ -165,9 +187,15 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{exc}: benchmarking local processes only", file=sys.stderr)
                 backends.remove("ray")
         for policy in args.policy or ["oracle"]:
-            job = EvalJob.create(args.dataset, args.split, houses=args.houses,
-                                 episodes_per_house=args.episodes_per_house, seed=args.seed, config=config,
-                                 policy=policy)
+            job = EvalJob.create(
+                args.dataset,
+                args.split,
+                houses=args.houses,
+                episodes_per_house=args.episodes_per_house,
+                seed=args.seed,
+                config=config,
+                policy=policy,
+            )
             keys = job.keys()[: args.episodes] if args.episodes else job.keys()
             for backend in backends:
                 for n in args.workers:

@@ -35,8 +35,10 @@ def main() -> int:
     args = ap.parse_args()
     report = json.loads(Path(args.audit).read_text())
     if not isinstance(report, dict) or not report.get("episodes"):
-        raise SystemExit(f"error: {args.audit} holds no audited episodes: run `l3mvn scenes audit --out DIR` "
-                         "on a dataset split with episode files")
+        raise SystemExit(
+            f"error: {args.audit} holds no audited episodes: run `l3mvn scenes audit --out DIR` "
+            "on a dataset split with episode files"
+        )
     audits = {e["key"]: e for e in report["episodes"]}
     columns = []
     for path in args.results:

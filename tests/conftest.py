@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from l3mvn.core.grid import disk
 from l3mvn.core.categories import GIBSON_CATEGORIES
+from l3mvn.core.grid import disk
 from l3mvn.world.scenes.scene import SceneMap
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
@@ -44,8 +44,15 @@ def draw_two_room_house(name: str = "Tiny", height: int = 120, width: int = 200)
     put("sink", 12, 20, 150, 164)
     free &= ~objects.any(0)
     navigable = ndi.binary_erosion(free, disk(4))
-    return SceneMap(name=name, floor=0, categories=GIBSON_CATEGORIES, navigable=navigable, objects=objects,
-                    origin_cm=(-300.0, -200.0), floor_height_m=0.0)
+    return SceneMap(
+        name=name,
+        floor=0,
+        categories=GIBSON_CATEGORIES,
+        navigable=navigable,
+        objects=objects,
+        origin_cm=(-300.0, -200.0),
+        floor_height_m=0.0,
+    )
 
 
 @pytest.fixture
@@ -78,15 +85,23 @@ def shut_dataset(tmp_path: Path) -> Path:
     episodes = generate_episodes(house, 6, seed=1, goals=("toilet", "bed"))
     navigable = house.navigable.copy()
     navigable[:, 93:107] = False
-    shut = SceneMap(name="Shut", floor=0, categories=house.categories, navigable=navigable, objects=house.objects,
-                    origin_cm=house.origin_cm, floor_height_m=0.0)
+    shut = SceneMap(
+        name="Shut",
+        floor=0,
+        categories=house.categories,
+        navigable=navigable,
+        objects=house.objects,
+        origin_cm=house.origin_cm,
+        floor_height_m=0.0,
+    )
     save_split(tmp_path, "val", [shut])
     write_episode_file(episode_file(tmp_path, "val", "Shut"), episodes, {0: shut})
     return tmp_path
 
 
-needs_gibson = pytest.mark.skipif(not (GIBSON / "train" / "train_info.pbz2").exists(),
-                                  reason="../shared Gibson maps not present")
+needs_gibson = pytest.mark.skipif(
+    not (GIBSON / "train" / "train_info.pbz2").exists(), reason="../shared Gibson maps not present"
+)
 
 
 def free_port() -> int:
@@ -121,10 +136,27 @@ def write_frontier_file(folder: Path, houses=("Allensville", "Coffeen", "Hiteman
             for objects, toilet in ((["sink"], 1.0), (["couch"], 5.0), (["vase", "couch"], 6.0)):
                 goal_m = {g: round(float(rng.uniform(1, 8)), 2) for g in GOALS}
                 goal_m["toilet"] = toilet + float(rng.uniform(0, 0.5))
-                frontiers.append({"cost": float(rng.uniform(1, 3)), "s_cu": float(rng.uniform()), "utility": 10.0,
-                                  "objects": {o: 1.0 for o in objects}, "goal_m": goal_m})
-            lines.append(json.dumps({"house": house, "episode": f"{house}/0/{k}", "seed": 0, "goal": "toilet",
-                                     "mapped": [], "frontiers": frontiers}))
+                frontiers.append(
+                    {
+                        "cost": float(rng.uniform(1, 3)),
+                        "s_cu": float(rng.uniform()),
+                        "utility": 10.0,
+                        "objects": {o: 1.0 for o in objects},
+                        "goal_m": goal_m,
+                    }
+                )
+            lines.append(
+                json.dumps(
+                    {
+                        "house": house,
+                        "episode": f"{house}/0/{k}",
+                        "seed": 0,
+                        "goal": "toilet",
+                        "mapped": [],
+                        "frontiers": frontiers,
+                    }
+                )
+            )
             lines.append(json.dumps({"done": f"{house}/0/{k}", "seed": 0, "choices": 1}))
     path = folder / "frontiers.jsonl"
     path.write_text("\n".join(lines) + "\n")
@@ -134,8 +166,8 @@ def write_frontier_file(folder: Path, houses=("Allensville", "Coffeen", "Hiteman
 def first_frontier_choice(scene: SceneMap, policy: str = "l3mvn-zs"):
     """The Decision of ``policy``'s first frontier choice on ``scene`` (toilet, 60x80 frames)."""
     from l3mvn.core.config import Config
-    from l3mvn.run.runner import Runner
     from l3mvn.core.types import Pose
+    from l3mvn.run.runner import Runner
     from l3mvn.world.episode import Episode
 
     session = Runner(Config().with_frame(60, 80)).session(scene, policy)

@@ -12,16 +12,16 @@ import math
 import numpy as np
 import pytest
 
+from l3mvn.agent.mapping import SemanticMap
 from l3mvn.agent.modular import MapAgent
+from l3mvn.agent.policies.global_policies import NearestFrontier
 from l3mvn.core.config import AgentConfig, Config, SimConfig, TaskConfig
 from l3mvn.core.errors import L3MVNError
-from l3mvn.agent.mapping import SemanticMap
-from l3mvn.agent.policies.global_policies import NearestFrontier
-from l3mvn.run.session import EpisodeSession
-from l3mvn.world.task import ObjectNavTask
-from l3mvn.world.sim.simulator import BuiltinSimulator
 from l3mvn.core.types import Action, Pose
+from l3mvn.run.session import EpisodeSession
 from l3mvn.world.episode import Episode
+from l3mvn.world.sim.simulator import BuiltinSimulator
+from l3mvn.world.task import ObjectNavTask
 
 MAX_STEPS = 300
 START = Pose(x=2.5, y=2.0, heading=math.pi)  # west room, facing away from the door
@@ -218,10 +218,20 @@ def _walled_target_map(agent_cell):
     target = np.zeros((n, n), bool)
     target[48:53, 114:119] = True
     explored = np.ones((n, n), bool)
-    sem_map = SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros_like(explored),
-                          categories=target[None], category_names=("toilet",), looked=explored, resolution_m=0.05,
-                          start_xy=(0.0, 0.0), agent_cell=agent_cell, agent_heading=0.0, local_cells=n,
-                          footprint_radius_cells=3)
+    sem_map = SemanticMap(
+        obstacle=obstacle,
+        explored=explored,
+        visited=np.zeros_like(explored),
+        categories=target[None],
+        category_names=("toilet",),
+        looked=explored,
+        resolution_m=0.05,
+        start_xy=(0.0, 0.0),
+        agent_cell=agent_cell,
+        agent_heading=0.0,
+        local_cells=n,
+        footprint_radius_cells=3,
+    )
     return sem_map, target
 
 
@@ -240,12 +250,15 @@ def test_a_target_behind_a_wall_is_approached_as_the_success_rule_measures(rule)
         assert not beside_wall.reached
 
 
-@pytest.mark.parametrize(("offset", "stuck", "stops"), [
-    ((5, 18), True, True),  # 0.93 m, no way closer: stop
-    ((5, 18), False, False),  # 0.93 m, a path closer: walk on
-    ((0, 19), True, True),  # 19 cells: exactly the 0.95 m bound (19 * 0.05 is 0.9500000000000001 in floats)
-    ((6, 19), True, False),  # 1.00 m: too far to count, stuck or not
-])
+@pytest.mark.parametrize(
+    ("offset", "stuck", "stops"),
+    [
+        ((5, 18), True, True),  # 0.93 m, no way closer: stop
+        ((5, 18), False, False),  # 0.93 m, a path closer: walk on
+        ((0, 19), True, True),  # 19 cells: exactly the 0.95 m bound (19 * 0.05 is 0.9500000000000001 in floats)
+        ((6, 19), True, False),  # 1.00 m: too far to count, stuck or not
+    ],
+)
 def test_a_target_the_agent_cannot_get_closer_to_is_stopped_at_within_the_success_distance(env, offset, stuck, stops):
     agent = _agent(env, look_around_steps=0)
     episode = _episode("toilet")
@@ -254,7 +267,7 @@ def test_a_target_the_agent_cannot_get_closer_to_is_stopped_at_within_the_succes
     agent.act(obs)
     row, col = agent.perception.map.agent_cell
     toilet = agent.perception.map.category("toilet")
-    toilet[row + offset[0]:row + offset[0] + 2, col + offset[1]:col + offset[1] + 2] = True
+    toilet[row + offset[0] : row + offset[0] + 2, col + offset[1] : col + offset[1] + 2] = True
     plan = agent.planner.plan
     agent.planner.plan = lambda *a, **k: dataclasses.replace(plan(*a, **k), stuck=stuck)
     d = agent.act(obs)
@@ -295,7 +308,6 @@ def test_stop_distances_are_checked_against_each_other_and_the_success_distance(
 
 def test_frontier_oracle_heads_for_the_frontier_nearest_the_goal_and_succeeds(env):
     from l3mvn.agent.policies.oracle_frontier import FrontierOracle
-
     from l3mvn.world.baselines import ObjectDistances, object_distances
 
     task = ObjectNavTask(env.scene, _tree(env))
@@ -308,9 +320,8 @@ def test_frontier_oracle_heads_for_the_frontier_nearest_the_goal_and_succeeds(en
         d = event.decision
         if d.goal_kind != "frontier" or len(d.frontiers) < 2 or not (d.reason or "").startswith("oracle"):
             continue
-        m = d.map
 
-        def to_goal(f):
+        def to_goal(f, m=d.map):
             return min(region.distance_at(*m.cell_to_world(int(r), int(c))) for r, c in f.cells)
 
         totals = [f.cost + to_goal(f) for f in d.frontiers]
@@ -377,10 +388,20 @@ def test_with_no_frontier_left_the_agent_goes_to_look_at_floor_it_only_saw_from_
     explored[20:221, 20:221] = True
     looked = explored.copy()
     looked[21:220, 160:220] = False
-    sem_map = SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros_like(explored),
-                          categories=np.zeros((1, n, n), bool), category_names=("toilet",), looked=looked,
-                          resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=(120, 60), agent_heading=0.0,
-                          local_cells=n, footprint_radius_cells=3)
+    sem_map = SemanticMap(
+        obstacle=obstacle,
+        explored=explored,
+        visited=np.zeros_like(explored),
+        categories=np.zeros((1, n, n), bool),
+        category_names=("toilet",),
+        looked=looked,
+        resolution_m=0.05,
+        start_xy=(0.0, 0.0),
+        agent_cell=(120, 60),
+        agent_heading=0.0,
+        local_cells=n,
+        footprint_radius_cells=3,
+    )
     agent = _agent(env)
     agent.reset(_episode())
     agent.explore.reselect(sem_map, agent.goal, agent.rng)
@@ -429,13 +450,15 @@ def test_looking_settings_are_checked_with_one_line_errors(env):
 def test_a_kept_frontier_names_why_it_was_chosen_once_not_once_per_keep():
     """Kept again and again, a frontier's reason must not quote the previous kept reason (the dashboard
     would show "kept frontier 1 (commitment): kept frontier 1 (commitment): ..." after two re-selections)."""
-    from l3mvn.agent.modular.exploration import ExplorationGoals
     from l3mvn.agent.frontiers import Frontier
+    from l3mvn.agent.modular.exploration import ExplorationGoals
     from l3mvn.agent.planning import LocalPlanner
     from l3mvn.agent.policies.global_policies import Selection
 
     config = Config()
-    goals = ExplorationGoals(NearestFrontier(), config, LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim))
+    goals = ExplorationGoals(
+        NearestFrontier(), config, LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim)
+    )
     cells = np.zeros((1, 2), np.int64)
     goals.frontiers = [Frontier(k, cells, (100, 100 + 40 * k), 5, 1.0, 1.0, 1.0, 0.5) for k in range(2)]
     goals.cell, goals.frontier = (100, 100), 0
@@ -452,8 +475,8 @@ def test_a_frontier_too_near_for_a_new_list_is_looked_beyond_before_the_timer_ch
     the plan can read it as reached, the new list leaves that frontier out (nearer than
     ``min_distance_m``): the agent walks to another, finds the first one nearest again and goes back,
     back and forth for hundreds of steps."""
-    from l3mvn.agent.modular.exploration import ExplorationGoals
     from l3mvn.agent.decision import GoalKind
+    from l3mvn.agent.modular.exploration import ExplorationGoals
     from l3mvn.agent.planning import LocalPlanner
 
     config = Config()
@@ -465,12 +488,24 @@ def test_a_frontier_too_near_for_a_new_list_is_looked_beyond_before_the_timer_ch
     obstacle[58:61, 106:118] = False  # ... with a door to the north
 
     def at(agent_cell):
-        return SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros_like(explored),
-                           categories=np.zeros((1, n, n), bool), category_names=("toilet",), looked=explored,
-                           resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=agent_cell, agent_heading=0.0,
-                           local_cells=n, footprint_radius_cells=3)
+        return SemanticMap(
+            obstacle=obstacle,
+            explored=explored,
+            visited=np.zeros_like(explored),
+            categories=np.zeros((1, n, n), bool),
+            category_names=("toilet",),
+            looked=explored,
+            resolution_m=0.05,
+            start_xy=(0.0, 0.0),
+            agent_cell=agent_cell,
+            agent_heading=0.0,
+            local_cells=n,
+            footprint_radius_cells=3,
+        )
 
-    goals = ExplorationGoals(NearestFrontier(), config, LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim))
+    goals = ExplorationGoals(
+        NearestFrontier(), config, LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim)
+    )
     goals.reselect(at((100, 80)), "toilet", np.random.default_rng(0))
     assert goals.kind == GoalKind.FRONTIER and goals.cell[0] < 62  # the door, 2.6 m away
     door = goals.cell
@@ -488,8 +523,8 @@ def test_with_no_other_frontier_left_the_edge_beside_guessed_obstacles_is_one():
     would draw unreachable random cells for many steps. Guesses are the weakest evidence on the map:
     once nothing else is left unknown, the edge beside them is a frontier (the planner still walks
     round them)."""
-    from l3mvn.agent.modular.exploration import ExplorationGoals
     from l3mvn.agent.decision import GoalKind
+    from l3mvn.agent.modular.exploration import ExplorationGoals
     from l3mvn.agent.planning import LocalPlanner
 
     config = Config()
@@ -505,12 +540,24 @@ def test_with_no_other_frontier_left_the_edge_beside_guessed_obstacles_is_one():
     obstacle |= inferred
 
     def goals_at(guesses, obstacle=obstacle):
-        sem_map = SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros_like(explored),
-                              categories=np.zeros((1, n, n), bool), category_names=("toilet",), looked=explored,
-                              resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=(110, 90), agent_heading=0.0,
-                              local_cells=n, footprint_radius_cells=3, inferred=guesses)
-        goals = ExplorationGoals(NearestFrontier(), config,
-                                 LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim))
+        sem_map = SemanticMap(
+            obstacle=obstacle,
+            explored=explored,
+            visited=np.zeros_like(explored),
+            categories=np.zeros((1, n, n), bool),
+            category_names=("toilet",),
+            looked=explored,
+            resolution_m=0.05,
+            start_xy=(0.0, 0.0),
+            agent_cell=(110, 90),
+            agent_heading=0.0,
+            local_cells=n,
+            footprint_radius_cells=3,
+            inferred=guesses,
+        )
+        goals = ExplorationGoals(
+            NearestFrontier(), config, LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim)
+        )
         goals.reselect(sem_map, "toilet", np.random.default_rng(0))
         return goals
 

@@ -8,25 +8,28 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import draw_two_room_house
 from scipy import ndimage as ndi
 
-from l3mvn.run.cli import main
-from l3mvn.core.config import Config
-from l3mvn.run.audit import REASONS, AuditConfig, FloorAuditor, audit_floor, audit_split
-from l3mvn.world.task.regions import footprint_region, goal_region
-from l3mvn.core.grid import disk
 from l3mvn.core.categories import GIBSON_CATEGORIES
+from l3mvn.core.config import Config
+from l3mvn.core.grid import disk
+from l3mvn.run.audit import REASONS, AuditConfig, FloorAuditor, audit_floor, audit_split
+from l3mvn.run.cli import main
 from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.sim.world import World, build_world
-
-from conftest import draw_two_room_house
+from l3mvn.world.task.regions import footprint_region, goal_region
 
 CFG = Config().with_frame(120, 160)
 DEV = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "gibson_semexp"
 
 
-def draw(free_boxes: list[tuple[int, int, int, int]], objects: dict[str, list[tuple[int, int, int, int]]],
-         shape: tuple[int, int] = (80, 80), walls: list[tuple[int, int, int, int]] = ()) -> SceneMap:
+def draw(
+    free_boxes: list[tuple[int, int, int, int]],
+    objects: dict[str, list[tuple[int, int, int, int]]],
+    shape: tuple[int, int] = (80, 80),
+    walls: list[tuple[int, int, int, int]] = (),
+) -> SceneMap:
     """Free floor and object footprints as (r0, r1, c0, c1) boxes; the navmesh is the free floor
     eroded by the agent radius, as in the real maps."""
     free = np.zeros(shape, bool)
@@ -90,7 +93,8 @@ def _merge(base: World, other: World, category: int) -> World:
         tri_category=np.concatenate([base.tri_category, other.tri_category[keep]]),
         tri_color=np.concatenate([base.tri_color, other.tri_color[keep]]),
         tri_normal=np.concatenate([base.tri_normal, other.tri_normal[keep]]),
-        walls=base.walls, furniture=base.furniture,
+        walls=base.walls,
+        furniture=base.furniture,
     )
 
 
@@ -117,8 +121,25 @@ def test_footprint_regions_of_the_instances_make_up_the_goal_region():
 
 def test_scenes_audit_cli_writes_json_and_pngs_and_audits_every_episode(tiny_dataset, tmp_path, capsys):
     out = tmp_path / "audit"
-    assert main(["scenes", "audit", "--dataset", str(tiny_dataset), "--split", "val", "--frame", "60x80",
-                 "--json", "--out", str(out), "--all-pngs"]) == 0
+    assert (
+        main(
+            [
+                "scenes",
+                "audit",
+                "--dataset",
+                str(tiny_dataset),
+                "--split",
+                "val",
+                "--frame",
+                "60x80",
+                "--json",
+                "--out",
+                str(out),
+                "--all-pngs",
+            ]
+        )
+        == 0
+    )
     report = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert report == json.loads((out / "audit.json").read_text())
     assert report["counts"]["instances"] == len(report["instances"]) == 8
@@ -133,12 +154,15 @@ def test_scenes_without_audit_still_lists(tiny_dataset, capsys):
     assert "Tiny" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("extra,message", [
-    (["audit", "--frame", "12by3"], "--frame: frame size must look like 120x160"),
-    (["audit", "--frame", "240x321"], "not divisible by the mapper's downsample factor"),
-    (["audit", "--scene", "Nowhere"], "unknown scene 'Nowhere'"),
-    (["--json"], "--json: only for 'l3mvn scenes audit'"),
-])
+@pytest.mark.parametrize(
+    "extra,message",
+    [
+        (["audit", "--frame", "12by3"], "--frame: frame size must look like 120x160"),
+        (["audit", "--frame", "240x321"], "not divisible by the mapper's downsample factor"),
+        (["audit", "--scene", "Nowhere"], "unknown scene 'Nowhere'"),
+        (["--json"], "--json: only for 'l3mvn scenes audit'"),
+    ],
+)
 def test_bad_audit_input_is_one_line(tiny_dataset, extra, message, capsys):
     assert main(["scenes", *extra, "--dataset", str(tiny_dataset), "--split", "val"]) == 2
     err = capsys.readouterr().err.strip()

@@ -7,6 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
+from l3mvn.core.config import Config
+from l3mvn.core.errors import L3MVNError
 from l3mvn_studio.compare import (
     PICTURE_HEIGHT,
     Contender,
@@ -19,8 +21,6 @@ from l3mvn_studio.compare import (
     parse_decision,
     run_comparison,
 )
-from l3mvn.core.config import Config
-from l3mvn.core.errors import L3MVNError
 
 SOURCE = EpisodeSource(None, "val", houses=1, episodes_per_house=2, seed=0)
 KEY = "procedural-0000/0/0"
@@ -31,8 +31,14 @@ def _small(max_steps: int) -> Config:
     return cfg.replace(sim=dataclasses.replace(cfg.sim, max_steps=max_steps))
 
 
-def _d(step: int, action: str = "move_forward", kind: str = "frontier", frontier: int | None = 1,
-       cell: tuple[int, int] | None = (10, 20), reason: str = "why") -> StepDecision:
+def _d(
+    step: int,
+    action: str = "move_forward",
+    kind: str = "frontier",
+    frontier: int | None = 1,
+    cell: tuple[int, int] | None = (10, 20),
+    reason: str = "why",
+) -> StepDecision:
     return StepDecision(step, action, kind, frontier, cell, f"{action} [{kind}] F{frontier} {reason}")
 
 
@@ -42,8 +48,17 @@ def test_identical_decisions_have_no_difference_whatever_the_reasons_say():
     assert first_difference(a, b) is None
 
 
-@pytest.mark.parametrize("change", [{"action": "turn_left"}, {"kind": "look"}, {"frontier": 2}, {"frontier": None},
-                                    {"cell": (10, 21)}, {"cell": None}])
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"action": "turn_left"},
+        {"kind": "look"},
+        {"frontier": 2},
+        {"frontier": None},
+        {"cell": (10, 21)},
+        {"cell": None},
+    ],
+)
 def test_the_first_step_that_differs_in_any_decision_field(change):
     a = [_d(k) for k in range(8)]
     b = [_d(k) for k in range(3)] + [_d(k, **change) for k in range(3, 8)]
@@ -72,16 +87,25 @@ def test_bad_inputs_are_one_line_errors_naming_the_choices():
     with pytest.raises(L3MVNError, match="unknown policy 'nope'; choose one of .*cost-utility") as e:
         check_contender("nope")
     assert "\n" not in str(e.value)
-    with pytest.raises(L3MVNError, match="'teleop' cannot be compared: it is driven by hand and cannot run by "
-                                         "itself; choose one of "):
+    with pytest.raises(
+        L3MVNError, match="'teleop' cannot be compared: it is driven by hand and cannot run by itself; choose one of "
+    ):
         check_contender("teleop")
     with pytest.raises(L3MVNError, match="keeps no map"):
         check_contender("oracle")
     assert "teleop" not in comparable_policies() and "cost-utility" in comparable_policies()
-    with pytest.raises(L3MVNError, match=r"episode 'procedural-0000/0/9' is not in this episode set; valid "
-                                         r"episodes: procedural-0000/0/0, procedural-0000/0/1$"):
-        run_comparison(SOURCE, "procedural-0000/0/9", Contender("frontier", _small(10)),
-                       Contender("cost-utility", _small(10)), "unused")
+    with pytest.raises(
+        L3MVNError,
+        match=r"episode 'procedural-0000/0/9' is not in this episode set; valid "
+        r"episodes: procedural-0000/0/0, procedural-0000/0/1$",
+    ):
+        run_comparison(
+            SOURCE,
+            "procedural-0000/0/9",
+            Contender("frontier", _small(10)),
+            Contender("cost-utility", _small(10)),
+            "unused",
+        )
 
 
 def test_two_policies_on_one_episode(tmp_path):

@@ -25,21 +25,23 @@ sync_api = pytest.importorskip("playwright.sync_api")
 from conftest import free_port, serve_dashboard
 from test_dashboard_browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_text, _wait
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
-                                                         "`playwright install chromium` runs these tests")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None, reason="no chromium: `apt install chromium` or `playwright install chromium` runs these tests"
+)
 
+from l3mvn.core.config import Config
 from l3mvn_studio.compare import compare_recordings
 from l3mvn_studio.results import recording_of
 from l3mvn_studio.server import start_dashboard
-from l3mvn.core.config import Config
 
 
 @pytest.fixture(scope="module")
 def dash(tmp_path_factory):
     cfg = Config().with_frame(240, 320)
     cfg = cfg.replace(sim=dataclasses.replace(cfg.sim, max_steps=60))
-    yield from serve_dashboard(episodes_per_house=2, policy="frontier", cfg=cfg,
-                               record_dir=tmp_path_factory.mktemp("rec"))
+    yield from serve_dashboard(
+        episodes_per_house=2, policy="frontier", cfg=cfg, record_dir=tmp_path_factory.mktemp("rec")
+    )
 
 
 @pytest.fixture
@@ -94,8 +96,11 @@ def test_compare_two_policies_step_by_step(dash, page):
     slider.focus()
     for _ in range(3):
         slider.press("ArrowRight")
-    _wait(lambda: "A: frontier, step 3:" in _panel_text(page) and "B: cost-utility, step 3:" in _panel_text(page),
-          timeout=30, what="step 3 of both")
+    _wait(
+        lambda: "A: frontier, step 3:" in _panel_text(page) and "B: cost-utility, step 3:" in _panel_text(page),
+        timeout=30,
+        what="step 3 of both",
+    )
     assert np.array_equal(_shown_picture(page), fresh.picture(3))
     # jump to the first difference
     page.get_by_role("button", name="Jump to first difference").click()
@@ -104,7 +109,7 @@ def test_compare_two_policies_step_by_step(dash, page):
     shown = _shown_picture(page)
     assert np.array_equal(shown, fresh.picture(k))
     a_k = fresh.a.picture(k)  # A's own step k inside the frame that flags the difference
-    assert np.array_equal(shown[44:40 + a_k.shape[0] - 4, 4:a_k.shape[1] - 4], a_k[4:-4, 4:-4])
+    assert np.array_equal(shown[44 : 40 + a_k.shape[0] - 4, 4 : a_k.shape[1] - 4], a_k[4:-4, 4:-4])
     for close in page.locator("button.mantine-Notification-closeButton").all():
         close.click()
     page.wait_for_timeout(1000)  # the notices slide out
@@ -140,12 +145,42 @@ def results_dash(tmp_path_factory):
     d = tmp_path_factory.mktemp("results")
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
     for policy in ("frontier", "cost-utility"):
-        subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", "eval", "--policy", policy, "--houses", "1",
-                        "--episodes-per-house", "2", "--frame", "120x160", "--set", "sim.max_steps=40",
-                        "--out", str(d / f"{policy}.jsonl"), "--record", "--record-dir", str(d / "rec")],
-                       check=True, capture_output=True, env=env, timeout=600)
-    dash = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="frontier",
-                           results_dir=d, recordings_dir=d / "rec", record_dir=d / "live")
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "l3mvn_studio.cli",
+                "eval",
+                "--policy",
+                policy,
+                "--houses",
+                "1",
+                "--episodes-per-house",
+                "2",
+                "--frame",
+                "120x160",
+                "--set",
+                "sim.max_steps=40",
+                "--out",
+                str(d / f"{policy}.jsonl"),
+                "--record",
+                "--record-dir",
+                str(d / "rec"),
+            ],
+            check=True,
+            capture_output=True,
+            env=env,
+            timeout=600,
+        )
+    dash = start_dashboard(
+        port=free_port(),
+        houses=1,
+        episodes_per_house=2,
+        policy="frontier",
+        results_dir=d,
+        recordings_dir=d / "rec",
+        record_dir=d / "live",
+    )
     yield dash
     dash.stop()
 
@@ -163,8 +198,10 @@ def test_compare_side_by_side_from_two_result_files(results_dash, page_factory):
     other = next(r for r in results._other.rows if r.raw["key"] == row.raw["key"])
     c = compare.comparison
     # each line's own recording (different policies, both recorded by eval): no re-run
-    assert (c.a.recording, c.b.recording) == (recording_of(results.source.recordings_dir, row),
-                                              recording_of(results.source.recordings_dir, other))
+    assert (c.a.recording, c.b.recording) == (
+        recording_of(results.source.recordings_dir, row),
+        recording_of(results.source.recordings_dir, other),
+    )
     assert c.a.label == f"A: {row.policy}" and c.b.label == f"B: {other.policy}"
     _wait(lambda: page.locator(".l3mvn-main-view img.l3mvn-picture").count() > 0, what="the compare picture")
     fresh = compare_recordings(c.a.recording, c.b.recording, c.episode_key)

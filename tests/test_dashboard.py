@@ -7,13 +7,13 @@ import threading
 import time
 
 import pytest
-
 from conftest import serve_dashboard
-from l3mvn_studio.page_text import md
-from l3mvn_studio.state import Notice
+
 from l3mvn.core.config import Config, SimConfig
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.events import StepEvent
+from l3mvn_studio.page_text import md
+from l3mvn_studio.state import Notice
 
 SMALL = Config(sim=SimConfig().with_frame(120, 160))
 
@@ -146,8 +146,8 @@ def test_manual_goal_on_a_policy_without_one_says_so(ctl):
 
 
 def test_manual_goal_before_any_episode_or_after_the_end_is_refused(dash):
-    from l3mvn_studio.session_worker import DashboardController
     from l3mvn.world.datasets import load_episode_set
+    from l3mvn_studio.session_worker import DashboardController
 
     fresh = DashboardController(load_episode_set(None, "val", houses=1, episodes_per_house=1, cfg=SMALL), SMALL)
     try:

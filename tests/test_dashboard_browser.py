@@ -32,15 +32,24 @@ def _find_chromium() -> Path | None:
 
 
 CHROMIUM = _find_chromium()
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
-                                                         "`playwright install chromium` runs these tests")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None, reason="no chromium: `apt install chromium` or `playwright install chromium` runs these tests"
+)
 
 from conftest import serve_dashboard
-from l3mvn_studio.scene_drawing import cell_to_xy  # noqa: E402
-from l3mvn.core.config import Config  # noqa: E402
 
-CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run"]
+from l3mvn.core.config import Config  # noqa: E402
+from l3mvn_studio.scene_drawing import cell_to_xy  # noqa: E402
+
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
 VIEWPORT = {"width": 1400, "height": 900}
 
 
@@ -108,7 +117,7 @@ def test_step_and_frontier_click_in_a_real_browser(dash, tmp_path):
                     break
                 n = _step_shown(page)
                 page.get_by_role("button", name="Step").click()
-                _wait(lambda: (_step_shown(page) or 0) > n, what="the next step")
+                _wait(lambda n=n: (_step_shown(page) or 0) > n, what="the next step")
             view = ctl.snapshot.map
             assert view.frontiers, "no frontiers after the look-around"
             page.get_by_role("button", name="Fit map in view").click()
@@ -124,8 +133,10 @@ def test_step_and_frontier_click_in_a_real_browser(dash, tmp_path):
             page.mouse.click(u, v)
             page.get_by_text("manual long-term goal set").first.wait_for(timeout=5_000)
             page.get_by_role("button", name="Step").click()
-            _wait(lambda: events and events[-1].decision is not None
-                  and events[-1].decision.goal_kind == "manual", what="a manual-goal step")
+            _wait(
+                lambda: events and events[-1].decision is not None and events[-1].decision.goal_kind == "manual",
+                what="a manual-goal step",
+            )
             decision = events[-1].decision
             assert decision.long_term_goal == target.cell
             assert decision.override == f"manual:{target.cell[0]},{target.cell[1]}"

@@ -19,16 +19,22 @@ sync_api = pytest.importorskip("playwright.sync_api")
 
 from conftest import free_port, serve_dashboard
 from test_dashboard_browser import (  # noqa: E402  (after the skip: it needs playwright too)
-    CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_text, _step_shown, _wait,
+    CHROMIUM,
+    CHROMIUM_ARGS,
+    VIEWPORT,
+    _panel_text,
+    _step_shown,
+    _wait,
 )
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
-                                                         "`playwright install chromium` runs these tests")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None, reason="no chromium: `apt install chromium` or `playwright install chromium` runs these tests"
+)
 
+from l3mvn.core.config import Config  # noqa: E402
 from l3mvn_studio.model_weights import scorer_problems  # noqa: E402
 from l3mvn_studio.server import start_dashboard  # noqa: E402
 from l3mvn_studio.tab_notices import NOTICE_SECONDS  # noqa: E402
-from l3mvn.core.config import Config  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -60,8 +66,10 @@ def page(dash, browser, tmp_path):
 
 def _input_values(page) -> list[str]:
     """The values the page's visible fields show, top to bottom (Scene, Episode, Target, ...)."""
-    return page.evaluate("Array.from(document.querySelectorAll('input'))"
-                         ".filter((i) => i.type !== 'hidden' && i.offsetParent !== null).map((i) => i.value)")
+    return page.evaluate(
+        "Array.from(document.querySelectorAll('input'))"
+        ".filter((i) => i.type !== 'hidden' && i.offsetParent !== null).map((i) => i.value)"
+    )
 
 
 def _input(page, value: str):
@@ -150,8 +158,11 @@ def test_a_finished_run_says_finished_and_its_outcome_stays(dash, page):
     ctl.set_speed(10)
     _blur(page)
     page.keyboard.press("r")
-    _wait(lambda: _step_shown(page) == 0 and f"{nearest.key} (oracle)" in _panel_text(page), timeout=60,
-          what="the nearest episode reset")
+    _wait(
+        lambda: _step_shown(page) == 0 and f"{nearest.key} (oracle)" in _panel_text(page),
+        timeout=60,
+        what="the nearest episode reset",
+    )
     page.get_by_role("button", name="Run", exact=True).click()
     _wait(lambda: _state(page) == "finished", timeout=120, what="the end of the episode")
     text = _panel_text(page)
@@ -178,8 +189,9 @@ def test_a_scorer_without_weights_is_shown_unavailable_and_refused_at_once(dash,
 
 
 def test_target_and_step_before_an_episode_explain_themselves(dash, browser, tmp_path):
-    fresh = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="frontier",
-                            cfg=Config().with_frame(120, 160))
+    fresh = start_dashboard(
+        port=free_port(), houses=1, episodes_per_house=2, policy="frontier", cfg=Config().with_frame(120, 160)
+    )
     page = browser.new_page(viewport=VIEWPORT)
     try:
         page.goto(fresh.url)
@@ -216,8 +228,10 @@ def test_the_ground_truth_toggle_draws_the_goal_and_clears_it(dash, page):
     before = canvas.screenshot()
     page.get_by_text("Ground truth", exact=True).click()
     _wait(lambda: dash.view.map_scene.gt_plane.visible, what="the ground-truth layer")
-    _wait(lambda: "GROUND TRUTH" in _panel_text(page) or "ground truth: goal instances" in _panel_text(page),
-          what="the layer marked as ground truth")
+    _wait(
+        lambda: "GROUND TRUTH" in _panel_text(page) or "ground truth: goal instances" in _panel_text(page),
+        what="the layer marked as ground truth",
+    )
     assert "ground truth: goal instances" in _panel_text(page)  # its legend
     assert dash.view.map_scene.gt_label.text.startswith(f"GROUND TRUTH: {ctl.snapshot.event.goal}")
     time.sleep(1.0)

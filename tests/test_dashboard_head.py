@@ -8,21 +8,20 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
-
 from conftest import serve_dashboard
-from l3mvn_studio.session_worker import DEFAULT_HEAD_CHOICE, DashboardController
+
 from l3mvn.core.config import Config, PolicyConfig, SimConfig, config_hash
 from l3mvn.core.config.policy import HEAD_KINDS
-from l3mvn.world.datasets import load_episode_set
 from l3mvn.core.errors import L3MVNError
+from l3mvn.world.datasets import load_episode_set
+from l3mvn_studio.session_worker import DEFAULT_HEAD_CHOICE, DashboardController
 
 SMALL = Config(sim=SimConfig().with_frame(60, 80))
 BAG = SMALL.replace(policy=PolicyConfig(head="frontiers-bag"))
 
 
 def _controller(cfg: Config, policy: str) -> DashboardController:
-    c = DashboardController(load_episode_set(None, "val", houses=1, episodes_per_house=1, cfg=cfg), cfg,
-                            policy=policy)
+    c = DashboardController(load_episode_set(None, "val", houses=1, episodes_per_house=1, cfg=cfg), cfg, policy=policy)
     c.notices = []
     c.on_notice(c.notices.append)
     return c
@@ -68,8 +67,11 @@ def test_the_head_starts_on_the_config_and_a_pick_is_what_the_next_reset_scores_
 
 
 def test_an_unknown_head_is_refused_with_the_valid_ones_and_changes_nothing(ctl):
-    with pytest.raises(L3MVNError, match=r"^unknown head 'bogus'; valid heads: default \(rooms\), frontiers, rooms, "
-                                         r"frontiers-bag, rooms-bag$"):
+    with pytest.raises(
+        L3MVNError,
+        match=r"^unknown head 'bogus'; valid heads: default \(rooms\), frontiers, rooms, "
+        r"frontiers-bag, rooms-bag$",
+    ):
         ctl.set_head("bogus")
     assert ctl.head == "frontiers-bag" and not ctl.notices
 

@@ -16,14 +16,20 @@ sync_api = pytest.importorskip("playwright.sync_api")
 
 from conftest import serve_dashboard
 from test_dashboard_browser import (  # noqa: E402  (after the skip: it needs playwright too)
-    CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_text, _step_shown, _wait,
+    CHROMIUM,
+    CHROMIUM_ARGS,
+    VIEWPORT,
+    _panel_text,
+    _step_shown,
+    _wait,
 )
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
-                                                         "`playwright install chromium` runs these tests")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None, reason="no chromium: `apt install chromium` or `playwright install chromium` runs these tests"
+)
 
-from l3mvn_studio.language_panel import BAR_PX, SHOWN_FRONTIERS  # noqa: E402
 from l3mvn.core.config import Config  # noqa: E402
+from l3mvn_studio.language_panel import BAR_PX, SHOWN_FRONTIERS  # noqa: E402
 
 MAX_CLICKS = 40  # the look-around takes 12 steps; episode 0 of house 0 (toilet) chooses at step 13
 
@@ -43,8 +49,11 @@ def test_the_language_folder_shows_bars_and_the_fusion_rule_of_the_choice(dash, 
             page.set_default_timeout(60_000)
             page.goto(dash.url)
             page.wait_for_selector("canvas", timeout=20_000)
-            _wait(lambda: "scores frontiers with a language model" in _panel_text(page), timeout=20,
-                  what="the Language folder's note before the first choice")
+            _wait(
+                lambda: "scores frontiers with a language model" in _panel_text(page),
+                timeout=20,
+                what="the Language folder's note before the first choice",
+            )
 
             page.get_by_role("button", name="Reset").click()
             _wait(lambda: _step_shown(page) == 0, timeout=60, what="step 0 (the language model loads once)")
@@ -54,7 +63,7 @@ def test_the_language_folder_shows_bars_and_the_fusion_rule_of_the_choice(dash, 
                     break
                 n = _step_shown(page)
                 page.get_by_role("button", name="Step").click()
-                _wait(lambda: (_step_shown(page) or 0) > n, timeout=30, what="the next step")
+                _wait(lambda n=n: (_step_shown(page) or 0) > n, timeout=30, what="the next step")
             view = ctl.snapshot.map
             assert view is not None and view.fusion is not None, "the agent never chose a frontier"
             line = view.fusion.describe()
@@ -83,7 +92,10 @@ def test_the_language_folder_shows_bars_and_the_fusion_rule_of_the_choice(dash, 
 
             ctl.set_policy("cost-utility")
             page.get_by_role("button", name="Reset").click()
-            _wait(lambda: "cost-utility uses no language" in _panel_text(page), timeout=30,
-                  what="the note of a policy without language")
+            _wait(
+                lambda: "cost-utility uses no language" in _panel_text(page),
+                timeout=30,
+                what="the note of a policy without language",
+            )
         finally:
             browser.close()

@@ -19,15 +19,16 @@ sync_api = pytest.importorskip("playwright.sync_api")
 from conftest import free_port
 from test_dashboard_browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_text, _wait
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
-                                                         "`playwright install chromium` runs these tests")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None, reason="no chromium: `apt install chromium` or `playwright install chromium` runs these tests"
+)
 
 from l3mvn_studio.server import start_dashboard
 
 # Each would leave a trace if it ran or became an element: window.__xss, an element marked data-xss,
 # a javascript: link, a dialog or a changed title.
 SCRIPT = "<script>window.__xss = 1</script>"
-IMAGE = "<img src=x onerror=\"window.__xss=2\" data-xss>"
+IMAGE = '<img src=x onerror="window.__xss=2" data-xss>'
 FRAME = "<iframe srcdoc=\"<script>parent.document.title='XSS-'+document.domain</script>\" data-xss></iframe>"
 LINK = "[press me](javascript:window.__xss=3)"
 BOLD = "<b data-xss onmouseover=alert(1)>bold</b> **stars** `ticks` | cell |"
@@ -35,9 +36,21 @@ FILE_NAME = "<img src=x onerror=alert(4) data-xss>.jsonl"  # sorts first: it is 
 
 
 def _row(**changes) -> dict:
-    row = {"key": FRAME, "scene": IMAGE, "episode_id": 0, "goal": SCRIPT, "policy": LINK, "config_hash": "c0ffee",
-           "rule": "semexp", "success": 0, "spl": 0.0, "dtg": 1.5, "failure": "timeout", "steps": 3,
-           "extra": {"coverage": 0.5}}
+    row = {
+        "key": FRAME,
+        "scene": IMAGE,
+        "episode_id": 0,
+        "goal": SCRIPT,
+        "policy": LINK,
+        "config_hash": "c0ffee",
+        "rule": "semexp",
+        "success": 0,
+        "spl": 0.0,
+        "dtg": 1.5,
+        "failure": "timeout",
+        "steps": 3,
+        "extra": {"coverage": 0.5},
+    }
     return {**row, **changes}
 
 
@@ -52,8 +65,15 @@ def dash(tmp_path_factory):
     solved = _row(success=1, failure="success", spl=0.8)
     (results / "z-other.jsonl").write_text(json.dumps(solved) + "\n")
     (live / "<img src=x onerror=alert(5) data-xss>.rrd").write_bytes(b"")
-    dash = start_dashboard(port=free_port(), houses=1, episodes_per_house=2, policy="frontier",
-                           results_dir=results, recordings_dir=d / "rec", record_dir=live)
+    dash = start_dashboard(
+        port=free_port(),
+        houses=1,
+        episodes_per_house=2,
+        policy="frontier",
+        results_dir=results,
+        recordings_dir=d / "rec",
+        record_dir=live,
+    )
     yield dash
     dash.stop()
 
@@ -100,7 +120,13 @@ def test_markup_from_result_files_and_recordings_stays_text(dash, tmp_path):
     assert dialogs == []
     # The same characters are on the page as text: in the file name, the table, the notes, the
     # comparison, the missing-recording note and the recordings list.
-    for shown in (FILE_NAME, "onerror=\"window.__xss=2\"", "window.__xss = 1", "(javascript:window.__xss=3)",
-                  "parent.document.title", "<b data-xss onmouseover=alert(1)>bold</b> **stars** `ticks` | cell |",
-                  "onerror=alert(5)"):
+    for shown in (
+        FILE_NAME,
+        'onerror="window.__xss=2"',
+        "window.__xss = 1",
+        "(javascript:window.__xss=3)",
+        "parent.document.title",
+        "<b data-xss onmouseover=alert(1)>bold</b> **stars** `ticks` | cell |",
+        "onerror=alert(5)",
+    ):
         assert shown in text, shown

@@ -12,8 +12,10 @@ import threading
 from pathlib import Path
 
 import pytest
-
 from conftest import free_port
+
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.recording import read_recording
 from l3mvn_studio.map_image import png_rgb
 from l3mvn_studio.page_text import md
 from l3mvn_studio.results import (
@@ -28,18 +30,31 @@ from l3mvn_studio.results import (
     solved_by_one,
     summaries,
 )
-from l3mvn.core.errors import L3MVNError
-from l3mvn.run.recording import read_recording
 
 HOUSES, PER_HOUSE, SEED = 1, 3, 0
-EVAL = ["--houses", str(HOUSES), "--episodes-per-house", str(PER_HOUSE), "--seed", str(SEED),
-        "--frame", "60x80", "--set", "sim.max_steps=40"]
+EVAL = [
+    "--houses",
+    str(HOUSES),
+    "--episodes-per-house",
+    str(PER_HOUSE),
+    "--seed",
+    str(SEED),
+    "--frame",
+    "60x80",
+    "--set",
+    "sim.max_steps=40",
+]
 
 
 def _eval(out: Path, policy: str, *extra: str) -> None:
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
-    subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", "eval", "--policy", policy, *EVAL, "--out", str(out), *extra],
-                   check=True, capture_output=True, env=env, timeout=600)
+    subprocess.run(
+        [sys.executable, "-m", "l3mvn_studio.cli", "eval", "--policy", policy, *EVAL, "--out", str(out), *extra],
+        check=True,
+        capture_output=True,
+        env=env,
+        timeout=600,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -71,8 +86,17 @@ def test_a_result_file_reads_filters_sorts_and_sums(evaluated):
 def test_bad_files_and_lines_are_one_line_problems(evaluated, tmp_path):
     good = (evaluated / "frontier.jsonl").read_text().splitlines()
     mixed = tmp_path / "mixed.jsonl"
-    mixed.write_text("\n".join([good[0], "{not json", json.dumps({"key": "x", "error": "boom\nmore"}),
-                                json.dumps({**json.loads(good[1]), "spl": "high"})]) + "\n")
+    mixed.write_text(
+        "\n".join(
+            [
+                good[0],
+                "{not json",
+                json.dumps({"key": "x", "error": "boom\nmore"}),
+                json.dumps({**json.loads(good[1]), "spl": "high"}),
+            ]
+        )
+        + "\n"
+    )
     f = load_result_file(mixed)
     assert len(f.rows) == 1
     assert f.problems[0].startswith("line 2: not JSON (") and "failed to run: boom" in f.problems[1]
@@ -80,8 +104,11 @@ def test_bad_files_and_lines_are_one_line_problems(evaluated, tmp_path):
     assert all("\n" not in p for p in f.problems)
     notes = tmp_path / "notes.jsonl"
     notes.write_text("hello\n")
-    with pytest.raises(L3MVNError, match=r"^notes.jsonl is not an eval result file: no episode line "
-                                         r"\(line 1: not JSON \(Expecting value at column 1\)\)$"):
+    with pytest.raises(
+        L3MVNError,
+        match=r"^notes.jsonl is not an eval result file: no episode line "
+        r"\(line 1: not JSON \(Expecting value at column 1\)\)$",
+    ):
         load_result_file(notes)
 
 
@@ -106,26 +133,48 @@ def test_a_recording_reads_back_one_picture_per_step(evaluated):
 def test_rerun_with_the_stored_config_and_seed_gives_the_stored_result(evaluated, tmp_path):
     made = []
     for row in load_result_file(evaluated / "frontier.jsonl").rows:
-        done = rerun(row.raw, dataset=None, split="val", houses=HOUSES, episodes_per_house=PER_HOUSE, seed=SEED,
-                     record_dir=tmp_path)
+        done = rerun(
+            row.raw,
+            dataset=None,
+            split="val",
+            houses=HOUSES,
+            episodes_per_house=PER_HOUSE,
+            seed=SEED,
+            record_dir=tmp_path,
+        )
         assert done.same_config and done.reproduced, done.summary
         for field in ("success", "spl", "dtg", "steps", "failure", "path_length_m"):
             assert done.row[field] == row.raw[field], field
         assert done.recording.parent == tmp_path and read_recording(done.recording).steps[-1] == row.steps
         made.append(done.recording)
     edited = {**row.raw, "config": {**row.raw["config"], "sim": {**row.raw["config"]["sim"], "max_steps": 5}}}
-    other = rerun(edited, dataset=None, split="val", houses=HOUSES, episodes_per_house=PER_HOUSE, seed=SEED,
-                  record_dir=tmp_path)
+    other = rerun(
+        edited, dataset=None, split="val", houses=HOUSES, episodes_per_house=PER_HOUSE, seed=SEED, record_dir=tmp_path
+    )
     made.append(other.recording)
     assert sorted(tmp_path.glob("*.rrd")) == sorted(made) and len(set(made)) == len(made)  # one new file each
     assert not other.same_config and not other.reproduced and other.row["steps"] <= 5
     assert "DIFFERENT result from stored" in other.summary and "config hash differs" in other.summary
     with pytest.raises(L3MVNError, match="is not in this dashboard's episode set"):
-        rerun({**row.raw, "key": "procedural-0099/0/0"}, dataset=None, split="val", houses=HOUSES,
-              episodes_per_house=PER_HOUSE, seed=SEED, record_dir=tmp_path)
+        rerun(
+            {**row.raw, "key": "procedural-0099/0/0"},
+            dataset=None,
+            split="val",
+            houses=HOUSES,
+            episodes_per_house=PER_HOUSE,
+            seed=SEED,
+            record_dir=tmp_path,
+        )
     with pytest.raises(L3MVNError, match="stores no config"):
-        rerun({k: v for k, v in row.raw.items() if k != "config"}, dataset=None, split="val", houses=HOUSES,
-              episodes_per_house=PER_HOUSE, seed=SEED, record_dir=tmp_path)
+        rerun(
+            {k: v for k, v in row.raw.items() if k != "config"},
+            dataset=None,
+            split="val",
+            houses=HOUSES,
+            episodes_per_house=PER_HOUSE,
+            seed=SEED,
+            record_dir=tmp_path,
+        )
 
 
 def test_three_tabs_rerunning_one_episode_leave_every_recording_readable(evaluated, tmp_path):
@@ -135,8 +184,13 @@ def test_three_tabs_rerunning_one_episode_leave_every_recording_readable(evaluat
 
     shutil.copytree(evaluated / "rec", tmp_path / "rec")
     before = {p.name: p.read_bytes() for p in (tmp_path / "rec").iterdir()}
-    dash = start_dashboard(port=free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, results_dir=evaluated,
-                           recordings_dir=tmp_path / "rec")
+    dash = start_dashboard(
+        port=free_port(),
+        houses=HOUSES,
+        episodes_per_house=PER_HOUSE,
+        results_dir=evaluated,
+        recordings_dir=tmp_path / "rec",
+    )
     try:
         panel = dash.view.results
         panel._load("frontier.jsonl")
@@ -163,10 +217,19 @@ def test_three_tabs_rerunning_one_episode_leave_every_recording_readable(evaluat
     assert len(reruns) == 3
     for path in reruns:
         assert read_recording(path).steps[-1] == row.steps
-    with pytest.raises(L3MVNError, match=r"re-runs would be recorded among the eval's own recordings in .*rec: give "
-                                         r"--record-dir another folder"):
-        start_dashboard(port=free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, results_dir=evaluated,
-                        recordings_dir=tmp_path / "rec", record_dir=tmp_path / "rec")
+    with pytest.raises(
+        L3MVNError,
+        match=r"re-runs would be recorded among the eval's own recordings in .*rec: give "
+        r"--record-dir another folder",
+    ):
+        start_dashboard(
+            port=free_port(),
+            houses=HOUSES,
+            episodes_per_house=PER_HOUSE,
+            results_dir=evaluated,
+            recordings_dir=tmp_path / "rec",
+            record_dir=tmp_path / "rec",
+        )
 
 
 def test_the_panel_starts_on_a_folder_whose_first_file_is_not_results(evaluated, tmp_path):
@@ -174,8 +237,13 @@ def test_the_panel_starts_on_a_folder_whose_first_file_is_not_results(evaluated,
 
     (tmp_path / "a_notes.jsonl").write_text("not results\n")
     (tmp_path / "b.jsonl").write_text((evaluated / "frontier.jsonl").read_text())
-    dash = start_dashboard(port=free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, results_dir=tmp_path,
-                           recordings_dir=evaluated / "rec")
+    dash = start_dashboard(
+        port=free_port(),
+        houses=HOUSES,
+        episodes_per_house=PER_HOUSE,
+        results_dir=tmp_path,
+        recordings_dir=evaluated / "rec",
+    )
     try:
         panel = dash.view.results
         assert panel._file is None and md("a_notes.jsonl is not an eval result file") in panel.notes.content
@@ -193,18 +261,27 @@ def test_hostile_files_in_the_results_folder_neither_crash_nor_hang_the_dashboar
     """A FIFO named like a result file is not offered (reading it would block forever); a file whose
     lines hold bad episode ids, NaN, a line nested 200,000 deep and one longer than the line limit
     opens with each of those lines named as a problem."""
-    from l3mvn_studio.server import start_dashboard
     from l3mvn.run.eval.results import MAX_LINE_BYTES
+    from l3mvn_studio.server import start_dashboard
 
     os.mkfifo(tmp_path / "a.jsonl")
     good = (evaluated / "frontier.jsonl").read_text().splitlines()
     row = json.loads(good[0])
     hostile = [json.dumps({**row, "episode_id": v}) for v in ("abc", [1])]
-    hostile += [good[0].replace('"dtg": ', '"dtg": NaN, "was": '), "[" * 200_000 + "]" * 200_000,
-                '"' + "x" * (MAX_LINE_BYTES + 10) + '"', good[1]]
+    hostile += [
+        good[0].replace('"dtg": ', '"dtg": NaN, "was": '),
+        "[" * 200_000 + "]" * 200_000,
+        '"' + "x" * (MAX_LINE_BYTES + 10) + '"',
+        good[1],
+    ]
     (tmp_path / "b.jsonl").write_text("\n".join(hostile) + "\n")
-    dash = start_dashboard(port=free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, results_dir=tmp_path,
-                           recordings_dir=evaluated / "rec")
+    dash = start_dashboard(
+        port=free_port(),
+        houses=HOUSES,
+        episodes_per_house=PER_HOUSE,
+        results_dir=tmp_path,
+        recordings_dir=evaluated / "rec",
+    )
     try:
         panel = dash.view.results
         assert tuple(panel.file.options) == ("b.jsonl",)

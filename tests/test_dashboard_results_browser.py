@@ -26,8 +26,9 @@ from test_dashboard_browser import (
     _wait,
 )
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium: `apt install chromium` or "
-                                                         "`playwright install chromium` runs these tests")
+pytestmark = pytest.mark.skipif(
+    CHROMIUM is None, reason="no chromium: `apt install chromium` or `playwright install chromium` runs these tests"
+)
 
 from l3mvn_studio.map_image import png_rgb
 from l3mvn_studio.results import load_result_file, recording_frames, recording_of
@@ -40,13 +41,42 @@ HOUSES, PER_HOUSE = 4, 5
 def dash(tmp_path_factory):
     d = tmp_path_factory.mktemp("served")
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
-    subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", "eval", "--policy", "frontier", "--houses", str(HOUSES),
-                    "--episodes-per-house", str(PER_HOUSE), "--frame", "60x80", "--set", "sim.max_steps=40",
-                    "--out", str(d / "frontier.jsonl"), "--record", "--record-dir", str(d / "rec")],
-                   check=True, capture_output=True, env=env, timeout=900)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "l3mvn_studio.cli",
+            "eval",
+            "--policy",
+            "frontier",
+            "--houses",
+            str(HOUSES),
+            "--episodes-per-house",
+            str(PER_HOUSE),
+            "--frame",
+            "60x80",
+            "--set",
+            "sim.max_steps=40",
+            "--out",
+            str(d / "frontier.jsonl"),
+            "--record",
+            "--record-dir",
+            str(d / "rec"),
+        ],
+        check=True,
+        capture_output=True,
+        env=env,
+        timeout=900,
+    )
     (d / "notes.jsonl").write_text("these are my notes, not results\n")
-    dash = start_dashboard(port=free_port(), houses=HOUSES, episodes_per_house=PER_HOUSE, policy="frontier",
-                           results_dir=d, recordings_dir=d / "rec")
+    dash = start_dashboard(
+        port=free_port(),
+        houses=HOUSES,
+        episodes_per_house=PER_HOUSE,
+        policy="frontier",
+        results_dir=d,
+        recordings_dir=d / "rec",
+    )
     yield dash
     dash.stop()
 

@@ -15,11 +15,12 @@ pytest.importorskip("trimesh")
 pytest.importorskip("embreex")
 
 from conftest import free_port
+
+from l3mvn.core.config import Config, TaskConfig  # noqa: E402
+from l3mvn.run.recording import read_recording  # noqa: E402
+from l3mvn.world.datasets.hm3d_export import export_hm3d  # noqa: E402
 from l3mvn_studio.cli import add_arguments, run  # noqa: E402
 from l3mvn_studio.server import start_dashboard  # noqa: E402
-from l3mvn.core.config import Config, TaskConfig  # noqa: E402
-from l3mvn.world.datasets.hm3d_export import export_hm3d  # noqa: E402
-from l3mvn.run.recording import read_recording  # noqa: E402
 
 HM3D = Config(task=TaskConfig(success_rule="hm3d")).with_frame(120, 160)
 
@@ -32,9 +33,16 @@ def exported(tmp_path_factory):
 
 
 def test_the_dashboard_runs_and_records_an_episode_of_a_scan_dataset(exported, tmp_path):
-    dash = start_dashboard(port=free_port(), dataset=exported / "objectnav_hm3d_v2", split="val",
-                           scenes_dir=exported / "scene_datasets", cfg=HM3D, policy="oracle",
-                           record=True, record_dir=tmp_path)
+    dash = start_dashboard(
+        port=free_port(),
+        dataset=exported / "objectnav_hm3d_v2",
+        split="val",
+        scenes_dir=exported / "scene_datasets",
+        cfg=HM3D,
+        policy="oracle",
+        record=True,
+        record_dir=tmp_path,
+    )
     try:
         ctl = dash.controller
         ctl.reset(ctl.scene_keys[0], 0)
@@ -59,8 +67,16 @@ def test_serve_reads_the_dataset_rule_and_a_missing_scan_root_is_one_line(export
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)
-    args = parser.parse_args(["--dataset", str(exported / "objectnav_hm3d_v2"), "--scenes",
-                              str(exported / "nowhere"), "--port", str(free_port())])
+    args = parser.parse_args(
+        [
+            "--dataset",
+            str(exported / "objectnav_hm3d_v2"),
+            "--scenes",
+            str(exported / "nowhere"),
+            "--port",
+            str(free_port()),
+        ]
+    )
     assert run(args) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error:") and "\n" not in err and "nowhere" in err

@@ -15,23 +15,32 @@ import msgspec
 import pytest
 import viser
 import zstandard
+from conftest import free_port, serve_dashboard
 from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
-from conftest import free_port, serve_dashboard
+from l3mvn.core.config import Config, SimConfig
+from l3mvn.core.errors import L3MVNError
 from l3mvn_studio.cli import serve_main
 from l3mvn_studio.origin import OriginPolicy
 from l3mvn_studio.server import start_dashboard
 from l3mvn_studio.viser_hooks import start_checked_server
-from l3mvn.core.config import Config, SimConfig
-from l3mvn.core.errors import L3MVNError
 
 SMALL = Config(sim=SimConfig().with_frame(120, 160))
 DEFAULT_SPEED = 4.0  # start_dashboard's steps per second
 TIMEOUT_S = 15.0  # generous: the suite may share two slow cores
 SUBPROTOCOL = f"viser-v{viser.__version__}"  # viser refuses a page of another version
-CAMERA = {"wxyz": [1.0, 0.0, 0.0, 0.0], "position": [0.0, 0.0, 5.0], "fov": 1.0, "near": 0.01, "far": 100.0,
-          "image_height": 600, "image_width": 800, "look_at": [0.0, 0.0, 0.0], "up_direction": [0.0, 1.0, 0.0]}
+CAMERA = {
+    "wxyz": [1.0, 0.0, 0.0, 0.0],
+    "position": [0.0, 0.0, 5.0],
+    "fov": 1.0,
+    "near": 0.01,
+    "far": 100.0,
+    "image_height": 600,
+    "image_width": 800,
+    "look_at": [0.0, 0.0, 0.0],
+    "up_direction": [0.0, 1.0, 0.0],
+}
 
 
 def _wait(predicate, what: str, timeout: float = TIMEOUT_S):
@@ -51,7 +60,7 @@ def _decode(frame: bytes) -> list[dict]:
     test needs them, so they are left undecoded.
     """
     size, packed = int.from_bytes(frame[:8], "little"), int.from_bytes(frame[8:16], "little")
-    inner = zstandard.ZstdDecompressor().decompress(frame[16:16 + packed], max_output_size=size)
+    inner = zstandard.ZstdDecompressor().decompress(frame[16 : 16 + packed], max_output_size=size)
     return msgspec.msgpack.decode(inner)["messages"]
 
 
@@ -69,11 +78,14 @@ class Tab:
         self.received: list[dict] = []
         self.wait_for(lambda m: m["type"] == "ReplayDoneMessage", "the page state")
         self.state, self.received = self.received, []
-        self.uuids = {m["props"]["label"]: m["uuid"] for m in self.state
-                      if isinstance(m.get("props"), dict) and "label" in m["props"]}
+        self.uuids = {
+            m["props"]["label"]: m["uuid"]
+            for m in self.state
+            if isinstance(m.get("props"), dict) and "label" in m["props"]
+        }
         self.client_id: int | None = None
 
-    def join(self, server: viser.ViserServer) -> "Tab":
+    def join(self, server: viser.ViserServer) -> Tab:
         before = set(server.get_clients())
         self.send("ViewerCameraMessage", **CAMERA)
         self.client_id = max(_wait(lambda: set(server.get_clients()) - before, "the tab to join"))
@@ -87,8 +99,14 @@ class Tab:
         self.send("GuiUpdateMessage", uuid=self.uuids[label], updates={"value": value})
 
     def click_map(self, origin, direction) -> None:
-        self.send("ScenePointerMessage", event_type="click", ray_origin=origin, ray_direction=direction,
-                  screen_pos=[[0.5, 0.5]], modifier=None)
+        self.send(
+            "ScenePointerMessage",
+            event_type="click",
+            ray_origin=origin,
+            ray_direction=direction,
+            screen_pos=[[0.5, 0.5]],
+            modifier=None,
+        )
 
     def wait_for(self, predicate, what: str) -> dict:
         """The first message so far, or arriving within TIMEOUT_S, that ``predicate`` accepts."""
@@ -108,8 +126,10 @@ class Tab:
                 pass
 
     def notice(self, fragment: str) -> dict:
-        return self.wait_for(lambda m: m["type"] == "NotificationShowMessage" and fragment in m["props"]["body"],
-                             f"a notice with {fragment!r}")["props"]
+        return self.wait_for(
+            lambda m: m["type"] == "NotificationShowMessage" and fragment in m["props"]["body"],
+            f"a notice with {fragment!r}",
+        )["props"]
 
     def notices(self) -> list[str]:
         return [m["props"]["body"] for m in self.received if m["type"] == "NotificationShowMessage"]
@@ -119,8 +139,13 @@ class Tab:
 
 
 def _connect(dash, origin: str | None) -> ClientConnection:
-    return connect(dash.url.replace("http", "ws", 1), origin=origin, subprotocols=[SUBPROTOCOL],
-                   max_size=None, open_timeout=TIMEOUT_S)
+    return connect(
+        dash.url.replace("http", "ws", 1),
+        origin=origin,
+        subprotocols=[SUBPROTOCOL],
+        max_size=None,
+        open_timeout=TIMEOUT_S,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -148,17 +173,38 @@ def open_tab(dash):
 def _state(dash) -> dict:
     """Everything a tab can change: the controls' values and options, the controller's settings."""
     v, c = dash.view, dash.controller
-    handles = (v.scene, v.episode, v.target, v.policy, v.scorer, v.controls, v.speed, v.record,
-               v.frontier_pick, v.goal_buttons)
-    return {"values": [repr(h.value) for h in handles], "options": [v.scene.options, v.episode.options],
-            "controller": (c.policy_name, c.scorer, c.record, c.steps_per_second, c.running, c.snapshot.seq)}
+    handles = (
+        v.scene,
+        v.episode,
+        v.target,
+        v.policy,
+        v.scorer,
+        v.controls,
+        v.speed,
+        v.record,
+        v.frontier_pick,
+        v.goal_buttons,
+    )
+    return {
+        "values": [repr(h.value) for h in handles],
+        "options": [v.scene.options, v.episode.options],
+        "controller": (c.policy_name, c.scorer, c.record, c.steps_per_second, c.running, c.snapshot.seq),
+    }
 
 
 # --- who may connect ---------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("origin", ["http://evil.example", "null", "http://127.0.0.1:{port}.evil.example",
-                                    "https://127.0.0.1:{port}", "http://localhost:{other}"])
+@pytest.mark.parametrize(
+    "origin",
+    [
+        "http://evil.example",
+        "null",
+        "http://127.0.0.1:{port}.evil.example",
+        "https://127.0.0.1:{port}",
+        "http://localhost:{other}",
+    ],
+)
 def test_a_page_from_another_site_is_refused_at_the_handshake(dash, origin):
     port = dash.server.get_port()
     before = _state(dash), set(dash.server.get_clients())
@@ -193,8 +239,14 @@ def test_a_dns_rebound_host_name_is_refused_even_for_the_page(dash):
 
 
 def test_allow_origin_admits_a_reverse_proxy_and_nothing_more():
-    d = start_dashboard(port=free_port(), houses=1, episodes_per_house=1, cfg=SMALL, policy="oracle",
-                        allow_origins=["https://Studio.Example.com/"])
+    d = start_dashboard(
+        port=free_port(),
+        houses=1,
+        episodes_per_house=1,
+        cfg=SMALL,
+        policy="oracle",
+        allow_origins=["https://Studio.Example.com/"],
+    )
     try:
         ws = _connect(d, "https://studio.example.com")
         try:
@@ -208,8 +260,9 @@ def test_allow_origin_admits_a_reverse_proxy_and_nothing_more():
         d.stop()
 
 
-@pytest.mark.parametrize("bad", ["studio.example.com", "ftp://studio.example.com", "https://x.org/path",
-                                 "https://user@x.org", "http://a b"])
+@pytest.mark.parametrize(
+    "bad", ["studio.example.com", "ftp://studio.example.com", "https://x.org/path", "https://user@x.org", "http://a b"]
+)
 def test_an_allow_origin_that_is_not_an_origin_is_refused_before_anything_starts(bad, capsys):
     with pytest.raises(L3MVNError, match="is not an origin"):
         OriginPolicy("127.0.0.1", [bad])
@@ -250,20 +303,26 @@ def test_a_check_that_fails_refuses_the_request(caplog):
 # --- what a connected tab may send ---------------------------------------------------------------
 
 
-@pytest.mark.parametrize("label, value, notice", [
-    ("Scene", "../../../../etc/passwd", "Scene: '../../../../etc/passwd' is not one of the choices; "
-                                        "valid: procedural-0000/0"),
-    ("Episode", "7: spaceship", "valid: 0: "),
-    ("Steps / s", math.nan, "Steps / s: nan is not a number from 0.5 to 60"),
-    ("Steps / s", math.inf, "Steps / s: inf is not a number from 0.5 to 60"),
-    ("Steps / s", 1e6, "is not a number from 0.5 to 60"),
-    ("Steps / s", "5", "Steps / s: '5' is not a number"),
-    ("Policy", "no-such-policy", "Policy: 'no-such-policy' is not one of the choices; valid: "),
-    ("Record (.rrd)", "yes", "Record (.rrd): 'yes' is not true or false"),
-    ("Controls", "Explode", "valid: Reset, Step, Run"),
-    ("Frontier", "F0", "Frontier is disabled right now"),
-    ("Fit map in view", "x" * 10_000, "a button click carries true, not 'xxxx"),
-])
+@pytest.mark.parametrize(
+    "label, value, notice",
+    [
+        (
+            "Scene",
+            "../../../../etc/passwd",
+            "Scene: '../../../../etc/passwd' is not one of the choices; valid: procedural-0000/0",
+        ),
+        ("Episode", "7: spaceship", "valid: 0: "),
+        ("Steps / s", math.nan, "Steps / s: nan is not a number from 0.5 to 60"),
+        ("Steps / s", math.inf, "Steps / s: inf is not a number from 0.5 to 60"),
+        ("Steps / s", 1e6, "is not a number from 0.5 to 60"),
+        ("Steps / s", "5", "Steps / s: '5' is not a number"),
+        ("Policy", "no-such-policy", "Policy: 'no-such-policy' is not one of the choices; valid: "),
+        ("Record (.rrd)", "yes", "Record (.rrd): 'yes' is not true or false"),
+        ("Controls", "Explode", "valid: Reset, Step, Run"),
+        ("Frontier", "F0", "Frontier is disabled right now"),
+        ("Fit map in view", "x" * 10_000, "a button click carries true, not 'xxxx"),
+    ],
+)
 def test_a_bad_value_changes_nothing_and_only_its_tab_is_told(dash, open_tab, label, value, notice):
     hostile, bystander = open_tab(), open_tab()
     before = _state(dash)
@@ -273,8 +332,14 @@ def test_a_bad_value_changes_nothing_and_only_its_tab_is_told(dash, open_tab, la
     assert _state(dash) == before
     handle = next(h for h in vars(dash.view).values() if getattr(h, "label", None) == label)
     if not isinstance(handle, (viser.GuiButtonHandle, viser.GuiButtonGroupHandle)):
-        hostile.wait_for(lambda m: m["type"] == "GuiUpdateMessage" and m["uuid"] == hostile.uuids[label]
-                         and m["updates"] == {"value": handle.value}, "the tab to be shown the real value again")
+        hostile.wait_for(
+            lambda m: (
+                m["type"] == "GuiUpdateMessage"
+                and m["uuid"] == hostile.uuids[label]
+                and m["updates"] == {"value": handle.value}
+            ),
+            "the tab to be shown the real value again",
+        )
     _no_broadcast_reached(dash, hostile, bystander, label)
 
 
@@ -283,8 +348,9 @@ def _no_broadcast_reached(dash, actor: Tab, bystander: Tab, label: str) -> None:
     arrives first (broadcasts keep their order), so anything sent before it would have too."""
     marker = DEFAULT_SPEED + 0.5
     actor.set("Steps / s", marker)
-    bystander.wait_for(lambda m: m["type"] == "GuiUpdateMessage" and m["updates"] == {"value": marker},
-                       "the marker update")
+    bystander.wait_for(
+        lambda m: m["type"] == "GuiUpdateMessage" and m["updates"] == {"value": marker}, "the marker update"
+    )
     if label != "Steps / s":
         assert bystander.updates_of(bystander.uuids[label]) == []
     assert all(u == {"value": marker} for u in bystander.updates_of(bystander.uuids["Steps / s"]))
@@ -316,8 +382,15 @@ def test_messages_the_page_never_sends_are_ignored(dash, open_tab, monkeypatch):
     tab, bystander = open_tab(), open_tab()
     before = _state(dash)
     tab.send("ShareUrlRequest")  # viser would open a public tunnel to this server
-    tab.send("FileTransferStartUpload", source_component_uuid=tab.uuids["Scene"], transfer_uuid="t",
-             filename="x.bin", mime_type="application/octet-stream", part_count=1, size_bytes=50_000_000)
+    tab.send(
+        "FileTransferStartUpload",
+        source_component_uuid=tab.uuids["Scene"],
+        transfer_uuid="t",
+        filename="x.bin",
+        mime_type="application/octet-stream",
+        part_count=1,
+        size_bytes=50_000_000,
+    )
     tab.send("GuiFormDirtyMessage", uuid=tab.uuids["Scene"])  # viser relays it to every tab
     tab.send("GuiButtonHoldMessage", uuid=tab.uuids["Fit map in view"], frequency=10.0)
     _no_broadcast_reached(dash, tab, bystander, "Scene")
@@ -327,8 +400,11 @@ def test_messages_the_page_never_sends_are_ignored(dash, open_tab, monkeypatch):
 
 def test_every_control_on_the_page_accepts_the_values_the_page_sends(dash, open_tab):
     tab = open_tab()
-    controls = {m["uuid"]: {**m["props"], "value": m["value"]} for m in tab.state
-                if m["type"] in ("GuiDropdownMessage", "GuiSliderMessage", "GuiCheckboxMessage")}
+    controls = {
+        m["uuid"]: {**m["props"], "value": m["value"]}
+        for m in tab.state
+        if m["type"] in ("GuiDropdownMessage", "GuiSliderMessage", "GuiCheckboxMessage")
+    }
     for m in tab.state:
         if m["type"] == "GuiUpdateMessage" and m["uuid"] in controls:
             controls[m["uuid"]].update(m["updates"])
@@ -348,15 +424,21 @@ def _reset(dash) -> None:
     assert ctl.wait_idle()
 
 
-@pytest.mark.parametrize("origin, direction, notice", [
-    ([math.nan, 0.0, 5.0], [0.0, 0.0, -1.0], "map click ignored: its ray origin (nan, 0.0, 5.0) is not three finite"),
-    ([1.0, -1.0, 5.0], [0.0, math.inf, -1.0], "its ray direction (0.0, inf, -1.0) is not three finite numbers"),
-    ([1.0, -1.0, 5.0], [0.0, -math.inf, -math.inf], "is not three finite numbers"),
-    ("abc", [0.0, 0.0, -1.0], "its ray origin 'abc' is not three finite numbers"),
-    ([1.0, -1.0, 1e308], [1e308, 0.0, -1e-300], "that click is outside the map"),  # finite, but meets z=0 at inf
-])
-def test_a_map_click_with_a_broken_ray_is_refused_and_the_server_goes_on(dash, open_tab, origin, direction,
-                                                                          notice):
+@pytest.mark.parametrize(
+    "origin, direction, notice",
+    [
+        (
+            [math.nan, 0.0, 5.0],
+            [0.0, 0.0, -1.0],
+            "map click ignored: its ray origin (nan, 0.0, 5.0) is not three finite",
+        ),
+        ([1.0, -1.0, 5.0], [0.0, math.inf, -1.0], "its ray direction (0.0, inf, -1.0) is not three finite numbers"),
+        ([1.0, -1.0, 5.0], [0.0, -math.inf, -math.inf], "is not three finite numbers"),
+        ("abc", [0.0, 0.0, -1.0], "its ray origin 'abc' is not three finite numbers"),
+        ([1.0, -1.0, 1e308], [1e308, 0.0, -1e-300], "that click is outside the map"),  # finite, but meets z=0 at inf
+    ],
+)
+def test_a_map_click_with_a_broken_ray_is_refused_and_the_server_goes_on(dash, open_tab, origin, direction, notice):
     _reset(dash)
     tab = open_tab()
     before = _state(dash)
@@ -367,8 +449,7 @@ def test_a_map_click_with_a_broken_ray_is_refused_and_the_server_goes_on(dash, o
     _wait(lambda: dash.controller.snapshot.event.step == 1, "a step after the refused click")
 
 
-def test_a_handler_that_raises_is_logged_and_becomes_an_error_notice_to_its_tab(dash, open_tab, monkeypatch,
-                                                                               caplog):
+def test_a_handler_that_raises_is_logged_and_becomes_an_error_notice_to_its_tab(dash, open_tab, monkeypatch, caplog):
     _reset(dash)
     tab, bystander = open_tab(), open_tab()
 
@@ -389,8 +470,12 @@ def test_a_handler_that_raises_is_logged_and_becomes_an_error_notice_to_its_tab(
 
 def test_garbage_frames_cost_only_the_connection_that_sent_them(dash, open_tab):
     bystander = open_tab()
-    for frame in (b"\xc1 not msgpack", msgspec.msgpack.encode({"type": "NoSuchMessage"}),
-                  msgspec.msgpack.encode({"type": "GuiUpdateMessage"}), msgspec.msgpack.encode([1, 2, 3])):
+    for frame in (
+        b"\xc1 not msgpack",
+        msgspec.msgpack.encode({"type": "NoSuchMessage"}),
+        msgspec.msgpack.encode({"type": "GuiUpdateMessage"}),
+        msgspec.msgpack.encode([1, 2, 3]),
+    ):
         ws = _connect(dash, dash.url)
         Tab(ws)
         ws.send(frame)
@@ -405,8 +490,12 @@ def test_garbage_frames_cost_only_the_connection_that_sent_them(dash, open_tab):
 def test_malformed_frames_are_dropped_with_one_log_line_per_kind_and_second(dash, open_tab, caplog):
     """A tab sending frames that do not decode keeps its connection and its controls: each bad frame
     is dropped, and the log gets at most one line per kind of fault per second."""
-    garbage = (b"\xc1 not msgpack", msgspec.msgpack.encode({"type": "NoSuchMessage"}),
-               msgspec.msgpack.encode({"type": "GuiUpdateMessage"}), msgspec.msgpack.encode([1, 2, 3]))
+    garbage = (
+        b"\xc1 not msgpack",
+        msgspec.msgpack.encode({"type": "NoSuchMessage"}),
+        msgspec.msgpack.encode({"type": "GuiUpdateMessage"}),
+        msgspec.msgpack.encode([1, 2, 3]),
+    )
     tab = open_tab()
     with caplog.at_level(logging.WARNING, logger="l3mvn_studio.viser_hooks"):
         started = time.monotonic()

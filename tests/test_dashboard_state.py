@@ -11,19 +11,19 @@ import time
 
 import numpy as np
 import pytest
-
 from conftest import serve_dashboard
+
+from l3mvn.core.config import Config, SimConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.events import StepEvent
+from l3mvn.run.viz import category_color
+from l3mvn.world.datasets import load_episode_set
 from l3mvn_studio.frontier_ranking import TOP_LABELS, labelled_frontiers
 from l3mvn_studio.map_image import TARGET_RINGS
 from l3mvn_studio.model_weights import model_problem, scorer_problems
 from l3mvn_studio.page_markdown import legend_html, status_markdown
 from l3mvn_studio.session_worker import DashboardController
 from l3mvn_studio.state import Notice, Snapshot
-from l3mvn.core.config import Config, SimConfig
-from l3mvn.world.datasets import load_episode_set
-from l3mvn.core.errors import L3MVNError
-from l3mvn.run.events import StepEvent
-from l3mvn.run.viz import category_color
 
 SMALL = Config(sim=SimConfig().with_frame(120, 160))
 
@@ -231,7 +231,6 @@ def test_the_legend_swatches_are_told_apart():
     colours = np.array([category_color(n) for n in names], dtype=np.float64)
     gaps = np.linalg.norm(colours[:, None] - colours[None], axis=2) + np.eye(len(names)) * 1e9
     assert gaps.min() > 40, f"{names[int(gaps.min(axis=1).argmin())]} looks like another category"
-
 
 
 def test_teleop_moves_by_hand_keeps_mapping_and_is_scored(ctl):

@@ -4,17 +4,20 @@ import math
 
 import numpy as np
 import pytest
+from conftest import GIBSON, needs_gibson
 
 from l3mvn.core.config import Config
-from l3mvn.world.episodes import (
-    episode_file, generate_episodes, read_episode_file, read_episodes, write_episode_file,
-)
 from l3mvn.core.errors import L3MVNError
-from l3mvn.world.task.regions import goal_region
-from l3mvn.world.scenes.semexp import load_split
 from l3mvn.core.types import Pose
-
-from conftest import GIBSON, needs_gibson
+from l3mvn.world.episodes import (
+    episode_file,
+    generate_episodes,
+    read_episode_file,
+    read_episodes,
+    write_episode_file,
+)
+from l3mvn.world.scenes.semexp import load_split
+from l3mvn.world.task.regions import goal_region
 
 
 def test_habitat_pose_round_trips_through_our_frame(tiny_scene):
@@ -72,8 +75,14 @@ def _write_raw(path, episodes):
 
 
 def test_episode_with_unknown_category_is_a_one_line_error(tiny_scene, tmp_path):
-    rec = {"episode_id": 0, "scene_id": "x/Tiny.glb", "start_position": [1.0, 0, 1.0],
-           "start_rotation": [1, 0, 0, 0], "object_category": "piano", "floor_id": 0}
+    rec = {
+        "episode_id": 0,
+        "scene_id": "x/Tiny.glb",
+        "start_position": [1.0, 0, 1.0],
+        "start_rotation": [1, 0, 0, 0],
+        "object_category": "piano",
+        "floor_id": 0,
+    }
     _write_raw(tmp_path / "Tiny_episodes.json.gz", [rec])
     with pytest.raises(L3MVNError, match="unknown category 'piano'.*valid: chair"):
         read_episode_file(tmp_path / "Tiny_episodes.json.gz", {0: tiny_scene})
@@ -81,8 +90,14 @@ def test_episode_with_unknown_category_is_a_one_line_error(tiny_scene, tmp_path)
 
 def test_episode_start_off_the_navmesh_is_rejected_naming_the_file(tiny_scene, tmp_path):
     pos, rot = tiny_scene.pose_to_habitat(Pose(0.1, 0.1, 0.0))  # in the outer wall
-    rec = {"episode_id": 7, "scene_id": "x/Tiny.glb", "start_position": pos, "start_rotation": rot,
-           "object_category": "toilet", "floor_id": 0}
+    rec = {
+        "episode_id": 7,
+        "scene_id": "x/Tiny.glb",
+        "start_position": pos,
+        "start_rotation": rot,
+        "object_category": "toilet",
+        "floor_id": 0,
+    }
     path = tmp_path / "Tiny_episodes.json.gz"
     _write_raw(path, [rec])
     with pytest.raises(L3MVNError, match=r"Tiny_episodes.json.gz.*off the navigable area"):
@@ -90,8 +105,14 @@ def test_episode_start_off_the_navmesh_is_rejected_naming_the_file(tiny_scene, t
 
 
 def test_non_finite_start_is_rejected(tiny_scene, tmp_path):
-    rec = {"episode_id": 0, "scene_id": "x/Tiny.glb", "start_position": [float("nan"), 0, 1.0],
-           "start_rotation": [1, 0, 0, 0], "object_category": "toilet", "floor_id": 0}
+    rec = {
+        "episode_id": 0,
+        "scene_id": "x/Tiny.glb",
+        "start_position": [float("nan"), 0, 1.0],
+        "start_rotation": [1, 0, 0, 0],
+        "object_category": "toilet",
+        "floor_id": 0,
+    }
     path = tmp_path / "Tiny_episodes.json.gz"
     path.write_bytes(gzip.compress(json.dumps({"episodes": [rec]}).encode()))
     with pytest.raises(L3MVNError, match="non-finite"):
@@ -124,7 +145,7 @@ def test_missing_content_dir_says_how_to_generate(tiny_dataset):
 def test_gibson_houses_each_get_episodes_with_a_path():
     scenes = load_split(GIBSON, "train")
     assert len(scenes) == 25
-    for name, floors in scenes.items():
+    for floors in scenes.values():
         eps = generate_episodes(floors[0], 6, seed=0)
         assert len(eps) == 6
         assert all(np.isfinite(e.geodesic_distance_m) for e in eps)

@@ -18,16 +18,25 @@ def _audit(key: str, confirmable: bool, reason: str | None = None) -> dict:
 
 
 def test_a_goal_the_world_does_not_let_the_agent_confirm_is_charged_to_the_world():
-    assert classify_failure(_row("A/0/1", "never_saw_target"), _audit("A/0/1", False, "no_floor")) == "world: lost floor"
-    assert classify_failure(_row("A/0/1", "stuck"), _audit("A/0/1", False, "unreachable")) == "world: object unreachable"
+    assert (
+        classify_failure(_row("A/0/1", "never_saw_target"), _audit("A/0/1", False, "no_floor")) == "world: lost floor"
+    )
+    assert (
+        classify_failure(_row("A/0/1", "stuck"), _audit("A/0/1", False, "unreachable")) == "world: object unreachable"
+    )
     assert classify_failure(_row("A/0/1", "timeout"), _audit("A/0/1", False, "erased,hidden")) == "world: hidden"
 
 
 def test_a_confirmable_goal_is_charged_to_the_agent_by_what_it_did():
     ok = _audit("A/0/1", True)
     assert classify_failure(_row("A/0/1", "unseen_in_explored"), ok) == "agent: never looked"
-    assert classify_failure(_row("A/0/1", "saw_target_not_reached", confirmed=False), ok) == "agent: glimpsed, not confirmed"
-    assert classify_failure(_row("A/0/1", "saw_target_not_reached", confirmed=True), ok) == "agent: confirmed, not reached"
+    assert (
+        classify_failure(_row("A/0/1", "saw_target_not_reached", confirmed=False), ok)
+        == "agent: glimpsed, not confirmed"
+    )
+    assert (
+        classify_failure(_row("A/0/1", "saw_target_not_reached", confirmed=True), ok) == "agent: confirmed, not reached"
+    )
     assert classify_failure(_row("A/0/1", "false_stop"), None) == "agent: false stop"
     assert classify_failure(_row("A/0/1", "success"), ok) is None
 

@@ -13,9 +13,9 @@ import json
 import numpy as np
 import pytest
 
-from l3mvn.core.errors import L3MVNError
-from l3mvn.core.config import FrontierConfig
 from l3mvn.agent.frontiers import Frontier, extract_frontiers
+from l3mvn.core.config import FrontierConfig
+from l3mvn.core.errors import L3MVNError
 
 RES = 0.05
 
@@ -156,8 +156,18 @@ def test_blocked_frontiers_are_dropped_before_the_far_limit_so_far_ones_return()
     (near,) = extract(explored, obstacle, agent, FrontierConfig(max_distance_m=2.0))
     maps = np.zeros((0, *explored.shape), dtype=bool)
     distance = straight_line(explored.shape, agent)
-    frontiers = extract_frontiers(explored, obstacle, agent, distance, maps, (), FrontierConfig(max_distance_m=2.0),
-                                  blocked=np.array([near.center]), blocked_radius_cells=20, resolution_m=RES)
+    frontiers = extract_frontiers(
+        explored,
+        obstacle,
+        agent,
+        distance,
+        maps,
+        (),
+        FrontierConfig(max_distance_m=2.0),
+        blocked=np.array([near.center]),
+        blocked_radius_cells=20,
+        resolution_m=RES,
+    )
     assert [f.center[1] for f in frontiers] == [90]
     with pytest.raises(L3MVNError, match="blocked"):
         extract_frontiers(explored, obstacle, agent, distance, maps, (), blocked=np.array([1, 2, 3]), resolution_m=RES)
@@ -171,8 +181,20 @@ def test_each_blocked_cell_can_have_its_own_radius():
     beside = np.array([[near[0] + 8, near[1]]])  # a done goal 8 cells along the door
 
     def centres(radii):
-        return [f.center[1] for f in extract_frontiers(explored, obstacle, agent, distance, maps, (),
-                                                       blocked=beside, blocked_radius_cells=radii, resolution_m=RES)]
+        return [
+            f.center[1]
+            for f in extract_frontiers(
+                explored,
+                obstacle,
+                agent,
+                distance,
+                maps,
+                (),
+                blocked=beside,
+                blocked_radius_cells=radii,
+                resolution_m=RES,
+            )
+        ]
 
     assert centres(np.array([10.0])) == [90]  # the door lies within 10 cells: dropped
     assert centres(np.array([5.0])) == [10, 90]  # within a 5-cell radius only the done spot: kept
@@ -343,8 +365,17 @@ def test_turn_cost_makes_the_frontier_ahead_cheaper_than_an_equally_near_one_beh
     assert plain[0].cost == pytest.approx(plain[1].cost)
     cfg = FrontierConfig(turn_cost_m_per_rad=0.5)
     shape = explored.shape
-    facing_right = extract_frontiers(explored, obstacle, agent, straight_line(shape, agent),
-                                     np.zeros((0, *shape), bool), (), cfg, agent_heading=0.0, resolution_m=RES)
+    facing_right = extract_frontiers(
+        explored,
+        obstacle,
+        agent,
+        straight_line(shape, agent),
+        np.zeros((0, *shape), bool),
+        (),
+        cfg,
+        agent_heading=0.0,
+        resolution_m=RES,
+    )
     by_side = {f.center[1]: f for f in facing_right}
     assert by_side[90].cost == pytest.approx(by_side[90].distance_m)
     assert by_side[10].cost == pytest.approx(by_side[10].distance_m + 0.5 * np.pi, abs=0.05)

@@ -50,8 +50,9 @@ def full(tmp_path):
 
 def _cli(*argv: str, cwd: Path = REPO) -> subprocess.CompletedProcess:
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
-    return subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", *argv], cwd=cwd, capture_output=True, text=True,
-                          env=env, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "l3mvn_studio.cli", *argv], cwd=cwd, capture_output=True, text=True, env=env, timeout=600
+    )
 
 
 def _one_error_line(done: subprocess.CompletedProcess) -> str:
@@ -70,8 +71,21 @@ def _left(disk: Path) -> list[str]:
 def recorded(tmp_path_factory) -> tuple[Path, Path]:
     """One recorded episode: (its results file, its recordings folder)."""
     d = tmp_path_factory.mktemp("recorded")
-    done = _cli("eval", "--policy", "frontier", "--houses", "1", "--episodes-per-house", "1", *SMALL,
-                "--out", str(d / "r.jsonl"), "--record", "--record-dir", str(d / "rec"))
+    done = _cli(
+        "eval",
+        "--policy",
+        "frontier",
+        "--houses",
+        "1",
+        "--episodes-per-house",
+        "1",
+        *SMALL,
+        "--out",
+        str(d / "r.jsonl"),
+        "--record",
+        "--record-dir",
+        str(d / "rec"),
+    )
     assert done.returncode == 0, done.stderr
     return d / "r.jsonl", d / "rec"
 
@@ -92,9 +106,32 @@ def test_export_to_a_full_disk_is_an_error_and_leaves_no_partial_video(full, rec
 
 def _eval_recorded(out: Path, record_dir: Path, **popen) -> subprocess.CompletedProcess:
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
-    return subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", "eval", "--policy", "frontier", "--houses", "1",
-                           "--episodes-per-house", "2", *SMALL, "--out", str(out), "--record", "--record-dir",
-                           str(record_dir)], cwd=REPO, capture_output=True, text=True, env=env, timeout=600, **popen)
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "l3mvn_studio.cli",
+            "eval",
+            "--policy",
+            "frontier",
+            "--houses",
+            "1",
+            "--episodes-per-house",
+            "2",
+            *SMALL,
+            "--out",
+            str(out),
+            "--record",
+            "--record-dir",
+            str(record_dir),
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+        **popen,
+    )
 
 
 def _results_kept(out: Path, done: subprocess.CompletedProcess) -> None:
@@ -115,6 +152,7 @@ def test_eval_recording_to_a_full_disk_keeps_the_results_and_exits_2(full, tmp_p
 def test_a_recording_cut_short_by_the_disk_is_named_and_the_run_exits_2(tmp_path):
     """Each file may grow to 256 KB: the recordings start, then their writes fail in rerun's
     background writer, which raises nothing; reading the file back finds each one cut."""
+
     def limited() -> None:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG
         resource.setrlimit(resource.RLIMIT_FSIZE, (256 << 10, 256 << 10))
@@ -128,19 +166,46 @@ def test_a_recording_cut_short_by_the_disk_is_named_and_the_run_exits_2(tmp_path
 
 
 def test_eval_video_to_a_full_disk_exits_2(full, tmp_path):
-    done = _cli("eval", "--policy", "frontier", "--houses", "1", "--episodes-per-house", "1", *SMALL,
-                "--out", str(tmp_path / "r.jsonl"), "--record-dir", str(tmp_path / "rec"),
-                "--video", str(full / "videos"))
+    done = _cli(
+        "eval",
+        "--policy",
+        "frontier",
+        "--houses",
+        "1",
+        "--episodes-per-house",
+        "1",
+        *SMALL,
+        "--out",
+        str(tmp_path / "r.jsonl"),
+        "--record-dir",
+        str(tmp_path / "rec"),
+        "--video",
+        str(full / "videos"),
+    )
     assert "were not written whole" in _one_error_line(done)
     assert _left(full) == []
-    devices = _cli("eval", "--policy", "frontier", "--houses", "1", "--episodes-per-house", "1", *SMALL,
-                   "--record-dir", str(tmp_path / "rec"), "--video", "/dev/full")
+    devices = _cli(
+        "eval",
+        "--policy",
+        "frontier",
+        "--houses",
+        "1",
+        "--episodes-per-house",
+        "1",
+        *SMALL,
+        "--record-dir",
+        str(tmp_path / "rec"),
+        "--video",
+        "/dev/full",
+    )
     assert "--video /dev/full is a file, not a folder" in _one_error_line(devices)
 
 
 def test_dataset_writers_on_a_full_disk_end_in_one_line(full):
-    for argv, what in ((["episodes", "generate", "--out", str(full / "ds"), "--houses", "1"], "map file"),
-                       (["export-hm3d", "--out", str(full / "hm3d"), "--houses", "1"], "")):
+    for argv, what in (
+        (["episodes", "generate", "--out", str(full / "ds"), "--houses", "1"], "map file"),
+        (["export-hm3d", "--out", str(full / "hm3d"), "--houses", "1"], ""),
+    ):
         line = _one_error_line(_cli(*argv))
         assert "No space left on device" in line and what in line
         assert all(".partial-" not in name for name in _left(full))

@@ -25,32 +25,47 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import draw_two_room_house
 from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from l3mvn.run.cli import main
+from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
 from l3mvn.core.config import (
-    EDGE_MODES, SELECTIONS, SUCCESS_RULES, UTILITY_MODES, Config, config_dict, config_hash, override,
+    EDGE_MODES,
+    SELECTIONS,
+    SUCCESS_RULES,
+    UTILITY_MODES,
+    Config,
+    config_dict,
+    config_hash,
+    override,
 )
 from l3mvn.core.config import settings as config_settings
-from l3mvn.world.episodes import (
-    ROTATION_NORM_TOLERANCE, episode_file, episode_record, generate_episodes, read_episode_file, write_episode_file,
-)
 from l3mvn.core.errors import L3MVNError
-from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
+from l3mvn.run.cli import main
+from l3mvn.world.episodes import (
+    ROTATION_NORM_TOLERANCE,
+    episode_file,
+    episode_record,
+    generate_episodes,
+    read_episode_file,
+    write_episode_file,
+)
 from l3mvn.world.scenes.semexp import load_split, save_split
-
-from conftest import draw_two_room_house
 
 HANG_S = 30.0  # far above any example here (milliseconds to ~1 s): only a real hang gets there
 
 
 def fuzz(examples: int, deadline_s: float = 5.0) -> settings:
     """Reproducible (derandomized, no example database) and sized so this file runs well under 60 s."""
-    return settings(max_examples=examples, deadline=timedelta(seconds=deadline_s), derandomize=True, database=None,
-                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
-                                           HealthCheck.filter_too_much])
+    return settings(
+        max_examples=examples,
+        deadline=timedelta(seconds=deadline_s),
+        derandomize=True,
+        database=None,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much],
+    )
 
 
 class Hang(BaseException):
@@ -61,6 +76,7 @@ class Hang(BaseException):
 def no_hang(what: object):
     """Fail (rather than stall the suite) when one call runs past HANG_S. Restores pytest-timeout's
     own SIGALRM timer afterwards, minus the time spent here."""
+
     def fire(signum, frame):
         raise Hang(f"ran past {HANG_S} s: {what!r}")
 
@@ -85,7 +101,9 @@ def assert_one_line(exc: L3MVNError) -> None:
 # --- values -------------------------------------------------------------------------------------
 
 NUMBERS = st.one_of(
-    st.integers(-5, 12), st.floats(-5.0, 12.0), st.floats(allow_nan=True, allow_infinity=True),
+    st.integers(-5, 12),
+    st.floats(-5.0, 12.0),
+    st.floats(allow_nan=True, allow_infinity=True),
     st.sampled_from([1e308, -1e308, 10**400, -(10**400), 2**63, 0.7, 3.0, 5e-324, True, False]),
 )
 JSON_SCALARS = st.one_of(st.none(), st.booleans(), NUMBERS, st.text(max_size=6))
@@ -119,8 +137,9 @@ FIELD_VALUES = {
     "object_category": st.one_of(st.sampled_from(GOAL_CATEGORIES + ("piano", "sink", "Toilet", "")), JSON_VALUES),
     "scene_id": st.one_of(st.sampled_from(["gibson_semantic/Tiny.glb", "Tiny", "x/Wee.glb", ""]), JSON_VALUES),
     "object_id": st.one_of(st.integers(-3, 5), JSON_VALUES),
-    "info": st.one_of(st.none(), st.fixed_dictionaries({"geodesic_distance": st.one_of(NUMBERS, JSON_VALUES)}),
-                      JSON_VALUES),
+    "info": st.one_of(
+        st.none(), st.fixed_dictionaries({"geodesic_distance": st.one_of(NUMBERS, JSON_VALUES)}), JSON_VALUES
+    ),
 }
 
 
@@ -223,8 +242,11 @@ def sem_maps(draw):
     """Mostly (channels, H, W) 0/1 maps of a numeric dtype with a navigable block, else anything."""
     if draw(st.integers(0, 3)) == 0:
         return draw(st.one_of(SMALL_ARRAYS, JSON_VALUES))
-    channels = draw(st.integers(2, len(GIBSON_CATEGORIES) + 1)) if draw(st.integers(0, 5)) else draw(
-        st.sampled_from([1, len(GIBSON_CATEGORIES) + 2]))
+    channels = (
+        draw(st.integers(2, len(GIBSON_CATEGORIES) + 1))
+        if draw(st.integers(0, 5))
+        else draw(st.sampled_from([1, len(GIBSON_CATEGORIES) + 2]))
+    )
     h, w = draw(st.integers(1, 6)), draw(st.integers(1, 6))
     dtype = draw(st.sampled_from([np.float64, np.float32, np.uint8, np.bool_, np.int64]))
     sem = np.zeros((channels, h, w), dtype)
@@ -237,13 +259,19 @@ def sem_maps(draw):
 
 MAP_FIELDS = {
     "sem_map": sem_maps(),
-    "origin": st.one_of(hnp.arrays(np.float64, st.sampled_from([(2,), (1,), (3,), (2, 1)])),
-                        st.lists(NUMBERS, min_size=1, max_size=3), SMALL_ARRAYS, JSON_VALUES),
-    "floor_height": st.one_of(NUMBERS, st.sampled_from([np.float64(0.25), np.int64(1), np.float32("nan")]),
-                              SMALL_ARRAYS, JSON_VALUES),
+    "origin": st.one_of(
+        hnp.arrays(np.float64, st.sampled_from([(2,), (1,), (3,), (2, 1)])),
+        st.lists(NUMBERS, min_size=1, max_size=3),
+        SMALL_ARRAYS,
+        JSON_VALUES,
+    ),
+    "floor_height": st.one_of(
+        NUMBERS, st.sampled_from([np.float64(0.25), np.int64(1), np.float32("nan")]), SMALL_ARRAYS, JSON_VALUES
+    ),
 }
-SCENE_KEYS = st.one_of(st.sampled_from(["Tiny", "Wee", "a/b", "..", "", "x\ny"]), st.text(max_size=4),
-                       st.integers(-1, 2), st.none())
+SCENE_KEYS = st.one_of(
+    st.sampled_from(["Tiny", "Wee", "a/b", "..", "", "x\ny"]), st.text(max_size=4), st.integers(-1, 2), st.none()
+)
 FLOOR_KEYS = st.one_of(st.integers(-1, 2), st.sampled_from([np.int64(1), 0.5, "0", "a", None]), st.booleans())
 
 
@@ -266,11 +294,14 @@ def near_valid_maps(draw):
     return {name: draw(st.dictionaries(st.integers(0, 2), map_records(), min_size=1, max_size=2)) for name in names}
 
 
-MAP_FILES = st.one_of(near_valid_maps(), st.one_of(
-    st.dictionaries(SCENE_KEYS, st.dictionaries(FLOOR_KEYS, map_records(), max_size=2), max_size=2),
-    st.dictionaries(SCENE_KEYS, JSON_VALUES, max_size=2),
-    JSON_VALUES,
-))
+MAP_FILES = st.one_of(
+    near_valid_maps(),
+    st.one_of(
+        st.dictionaries(SCENE_KEYS, st.dictionaries(FLOOR_KEYS, map_records(), max_size=2), max_size=2),
+        st.dictionaries(SCENE_KEYS, JSON_VALUES, max_size=2),
+        JSON_VALUES,
+    ),
+)
 
 
 def _load_map_bytes(root: Path, blob: bytes):
@@ -309,13 +340,17 @@ def test_map_records_are_loaded_or_refused_in_one_line(workdir, raw):
         _check_accepted_maps(raw, scenes)
 
 
-VALID_MAP_PICKLE = pickle.dumps({"Tiny": {0: {"sem_map": np.eye(3)[None].repeat(2, 0), "origin": np.array([1, 2]),
-                                              "floor_height": 0.5}}})
+VALID_MAP_PICKLE = pickle.dumps(
+    {"Tiny": {0: {"sem_map": np.eye(3)[None].repeat(2, 0), "origin": np.array([1, 2]), "floor_height": 0.5}}}
+)
 
 
 @fuzz(150, deadline_s=2.0)
-@given(blob=st.one_of(damaged(VALID_MAP_PICKLE).map(bz2.compress), damaged(bz2.compress(VALID_MAP_PICKLE)),
-                      st.binary(max_size=60)))
+@given(
+    blob=st.one_of(
+        damaged(VALID_MAP_PICKLE).map(bz2.compress), damaged(bz2.compress(VALID_MAP_PICKLE)), st.binary(max_size=60)
+    )
+)
 def test_damaged_map_files_are_refused_in_one_line(workdir, blob):
     _load_map_bytes(workdir, blob)
 
@@ -324,19 +359,46 @@ def test_damaged_map_files_are_refused_in_one_line(workdir, blob):
 
 FIELDS = config_settings(Config())
 SETTING_NAMES = st.one_of(
-    st.sampled_from(FIELDS), st.sampled_from(FIELDS).map(lambda s: s.split(".", 1)[1]),
-    st.sampled_from(["sim.", ".frame_height", "nosuch.field", "sim.nosuch", "sim.frame_height.x", "",
-                     " sim . max_steps"]),
+    st.sampled_from(FIELDS),
+    st.sampled_from(FIELDS).map(lambda s: s.split(".", 1)[1]),
+    st.sampled_from(
+        ["sim.", ".frame_height", "nosuch.field", "sim.nosuch", "sim.frame_height.x", "", " sim . max_steps"]
+    ),
     st.text(max_size=8),
 )
 SETTING_VALUES = st.one_of(
-    st.integers(-10, 10**6).map(str), st.floats(allow_nan=True, allow_infinity=True).map(repr),
-    st.sampled_from(["0", "-1", "1e308", "-1e308", "nan", "inf", "1e-320", "9" * 400, "none", "None", "true",
-                     "false", "1_000", " 3 ", "0x10", "", "3.0", "0.5", "2.5e3", *SUCCESS_RULES, *EDGE_MODES]),
+    st.integers(-10, 10**6).map(str),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.sampled_from(
+        [
+            "0",
+            "-1",
+            "1e308",
+            "-1e308",
+            "nan",
+            "inf",
+            "1e-320",
+            "9" * 400,
+            "none",
+            "None",
+            "true",
+            "false",
+            "1_000",
+            " 3 ",
+            "0x10",
+            "",
+            "3.0",
+            "0.5",
+            "2.5e3",
+            *SUCCESS_RULES,
+            *EDGE_MODES,
+        ]
+    ),
     st.text(max_size=8),
 )
-DEFAULTS = {f"{section}.{key}": value for section, fields in config_dict(Config()).items()
-            for key, value in fields.items()}
+DEFAULTS = {
+    f"{section}.{key}": value for section, fields in config_dict(Config()).items() for key, value in fields.items()
+}
 
 
 def _near_default(name: str) -> st.SearchStrategy[str]:
@@ -352,9 +414,14 @@ def _near_default(name: str) -> st.SearchStrategy[str]:
 
 PLAUSIBLE = st.sampled_from(FIELDS).flatmap(lambda name: _near_default(name).map(lambda v: f"{name}={v}"))
 ASSIGNMENTS = st.one_of(
-    PLAUSIBLE, PLAUSIBLE,
-    st.builds(lambda name, sep, value: f"{name}{sep}{value}", SETTING_NAMES, st.sampled_from(["=", " = ", "", "=="]),
-              SETTING_VALUES),
+    PLAUSIBLE,
+    PLAUSIBLE,
+    st.builds(
+        lambda name, sep, value: f"{name}{sep}{value}",
+        SETTING_NAMES,
+        st.sampled_from(["=", " = ", "", "=="]),
+        SETTING_VALUES,
+    ),
 )
 
 
@@ -394,11 +461,26 @@ SOURCE_FLAGS = {
     "--seed": mostly(["0", "1", str(10**30)], ["-1", "x", "1e3"]),
 }
 # --set values that keep a run short (the config test above fuzzes --set itself).
-CLI_SETTINGS = st.sampled_from([
-    "sim.max_steps=20", "sim.max_steps=0", "sim.hfov_deg=90", "sim.hfov_deg=nan", "task.success_rule=geodesic",
-    "task.success_rule=x", "agent.replan_every=5", "max_stepz=3", "sim.turn_angle_deg=200", "policy.seg_noise=0.5",
-    "frontiers.edge=all", "=", "sim", "map.resolution_m=0", "agent.look_tolerance_deg=1", "sim.min_depth_m=9",
-])
+CLI_SETTINGS = st.sampled_from(
+    [
+        "sim.max_steps=20",
+        "sim.max_steps=0",
+        "sim.hfov_deg=90",
+        "sim.hfov_deg=nan",
+        "task.success_rule=geodesic",
+        "task.success_rule=x",
+        "agent.replan_every=5",
+        "max_stepz=3",
+        "sim.turn_angle_deg=200",
+        "policy.seg_noise=0.5",
+        "frontiers.edge=all",
+        "=",
+        "sim",
+        "map.resolution_m=0",
+        "agent.look_tolerance_deg=1",
+        "sim.min_depth_m=9",
+    ]
+)
 SIM_FLAGS = {
     "--rule": mostly(list(SUCCESS_RULES), ["bogus"]),
     "--frame": mostly(["24x32", "32x24", "24X32", "2x2", "16x16"], ["0x5", "5", "ax3", "-24x32"]),
@@ -407,39 +489,70 @@ SIM_FLAGS = {
 POSES = st.one_of(
     st.sampled_from(["2.5,3.0,0", "4.0,4.0,90", "7.5,2.0,-45", "6.0,3.5,1e6"]),  # on the floor of both houses
     st.tuples(st.floats(-2, 12), st.floats(-2, 8), st.floats(-720, 720)).map(lambda p: ",".join(map(str, p))),
-    st.sampled_from(["1e6,1e6,0", "0.1,0.1,0", "5.0,1.0,0", "nan,1,0", "1,inf,0", "2.5,3", "a,b,c", "",
-                     "1e308,1e308,1e308"]),
+    st.sampled_from(
+        ["1e6,1e6,0", "0.1,0.1,0", "5.0,1.0,0", "nan,1,0", "1,inf,0", "2.5,3", "a,b,c", "", "1e308,1e308,1e308"]
+    ),
 )
-RENDER_OUTS = mostly([f"{OUTDIR}/a.png", f"{OUTDIR}/a.JPG", f"{OUTDIR}/d/e/a.bmp"],
-                     [f"{OUTDIR}/a.xyz", OUTDIR, f"{FILE}/a.png", f"{OUTDIR}/a.xbm", f"{OUTDIR}/noext",
-                      f"{LONG}.png", ""])
+RENDER_OUTS = mostly(
+    [f"{OUTDIR}/a.png", f"{OUTDIR}/a.JPG", f"{OUTDIR}/d/e/a.bmp"],
+    [f"{OUTDIR}/a.xyz", OUTDIR, f"{FILE}/a.png", f"{OUTDIR}/a.xbm", f"{OUTDIR}/noext", f"{LONG}.png", ""],
+)
 # Per command: the words it starts with, flags always given (None: sometimes left out) and optional ones.
 COMMANDS = {
     "config": (["config"], {}, {**SIM_FLAGS, "--json": None}),
-    "scenes": (["scenes"], {}, {**SOURCE_FLAGS, "--scene": st.just("Tiny"), "--json": None, "--all-pngs": None,
-                                "--out": st.just(OUTDIR), "--frame": SIM_FLAGS["--frame"], "--set": CLI_SETTINGS}),
-    "render": (["render", "--frame", "24x32"], {
-        "--dataset": mostly([DATASET], [FILE, MISSING, LONG, ""]), "--out": RENDER_OUTS,
-        "--pose": st.one_of(POSES, POSES, st.none()),
-    }, {
-        **SOURCE_FLAGS, **SIM_FLAGS, "--scene": mostly(["Tiny", "Wee"], ["Nowhere", "procedural-0000", ""]),
-        "--floor": mostly(["0"], ["1", "-1", "x"]),
-    }),
-    "generate": (["episodes", "generate"], {
-        "--out": mostly([f"{OUTDIR}/gen", f"{OUTDIR}/new/deep"], [FILE, f"{FILE}/x", LONG]),
-    }, {
-        **SOURCE_FLAGS, "--per-scene": mostly(["1", "2"], ["0", "x"]),
-        "--min-distance": mostly(["0.5", "5"], ["nan", "-1", "inf", "x"]),
-        "--max-distance": mostly(["30", "2"], ["nan", "0", "-inf"]),
-    }),
+    "scenes": (
+        ["scenes"],
+        {},
+        {
+            **SOURCE_FLAGS,
+            "--scene": st.just("Tiny"),
+            "--json": None,
+            "--all-pngs": None,
+            "--out": st.just(OUTDIR),
+            "--frame": SIM_FLAGS["--frame"],
+            "--set": CLI_SETTINGS,
+        },
+    ),
+    "render": (
+        ["render", "--frame", "24x32"],
+        {
+            "--dataset": mostly([DATASET], [FILE, MISSING, LONG, ""]),
+            "--out": RENDER_OUTS,
+            "--pose": st.one_of(POSES, POSES, st.none()),
+        },
+        {
+            **SOURCE_FLAGS,
+            **SIM_FLAGS,
+            "--scene": mostly(["Tiny", "Wee"], ["Nowhere", "procedural-0000", ""]),
+            "--floor": mostly(["0"], ["1", "-1", "x"]),
+        },
+    ),
+    "generate": (
+        ["episodes", "generate"],
+        {
+            "--out": mostly([f"{OUTDIR}/gen", f"{OUTDIR}/new/deep"], [FILE, f"{FILE}/x", LONG]),
+        },
+        {
+            **SOURCE_FLAGS,
+            "--per-scene": mostly(["1", "2"], ["0", "x"]),
+            "--min-distance": mostly(["0.5", "5"], ["nan", "-1", "inf", "x"]),
+            "--max-distance": mostly(["30", "2"], ["nan", "0", "-inf"]),
+        },
+    ),
 }
 EVAL_FLAGS = {
-    "--rule": SIM_FLAGS["--rule"], "--set": CLI_SETTINGS, "--seed": SOURCE_FLAGS["--seed"],
+    "--rule": SIM_FLAGS["--rule"],
+    "--set": CLI_SETTINGS,
+    "--seed": SOURCE_FLAGS["--seed"],
     "--seg-noise": st.sampled_from(["0", "0.2", "-1", "nan", "2", "x"]),
-    "--selection": st.sampled_from(["paper", "official_code", "x"]), "--scorer": st.sampled_from(["x", "cooccurrence"]),
+    "--selection": st.sampled_from(["paper", "official_code", "x"]),
+    "--scorer": st.sampled_from(["x", "cooccurrence"]),
     "--out": st.sampled_from([f"{OUTDIR}/r.jsonl", f"{OUTDIR}/r.jsonl", OUTDIR, f"{FILE}/r.jsonl", LONG]),
-    "--json": None, "--resume": None,
-    "--address": st.just("auto"), "--workers": st.sampled_from(["1", "0", "x"]), "--episodes-per-house": st.just("1"),
+    "--json": None,
+    "--resume": None,
+    "--address": st.just("auto"),
+    "--workers": st.sampled_from(["1", "0", "x"]),
+    "--episodes-per-house": st.just("1"),
 }
 
 
@@ -459,8 +572,9 @@ def cli_argv(draw) -> list[str]:
         assume(not words or words[0] not in ("replay", "language", "train-head", "serve"))
         return words
     prefix, required, pool = COMMANDS[draw(st.sampled_from(sorted(COMMANDS)))]
-    given_flags = [word for flag, strategy in required.items() if (value := draw(strategy)) is not None
-                   for word in (flag, value)]
+    given_flags = [
+        word for flag, strategy in required.items() if (value := draw(strategy)) is not None for word in (flag, value)
+    ]
     stray = [draw(JUNK)] if draw(st.integers(0, 5)) == 0 else []
     return prefix + given_flags + draw(flags(pool)) + stray
 
@@ -473,14 +587,26 @@ def cli_paths(tmp_path_factory) -> dict[str, str]:
     houses = [draw_two_room_house("Tiny"), draw_two_room_house("Wee", height=130, width=210)]
     save_split(root / "data", "val", houses)
     for house in houses:
-        write_episode_file(episode_file(root / "data", "val", house.name),
-                           generate_episodes(house, 2, seed=1, goals=("toilet", "bed")), {0: house})
+        write_episode_file(
+            episode_file(root / "data", "val", house.name),
+            generate_episodes(house, 2, seed=1, goals=("toilet", "bed")),
+            {0: house},
+        )
     (root / "file").write_text("not a directory")
     (root / "out").mkdir()
-    paths = {DATASET: str(root / "data"), FILE: str(root / "file"), MISSING: str(root / "missing"),
-             OUTDIR: str(root / "out"), LONG: str(root / ("a" * 300))}
-    assert _run_cli(["render", "--dataset", paths[DATASET], "--frame", "24x32", "--out", f"{paths[OUTDIR]}/w.png"],
-                    paths)[0] == 0
+    paths = {
+        DATASET: str(root / "data"),
+        FILE: str(root / "file"),
+        MISSING: str(root / "missing"),
+        OUTDIR: str(root / "out"),
+        LONG: str(root / ("a" * 300)),
+    }
+    assert (
+        _run_cli(["render", "--dataset", paths[DATASET], "--frame", "24x32", "--out", f"{paths[OUTDIR]}/w.png"], paths)[
+            0
+        ]
+        == 0
+    )
     return paths
 
 
@@ -531,11 +657,24 @@ def _check_rendered_pose(argv: list[str], out: str, paths: dict[str, str]) -> No
 
 
 @fuzz(25, deadline_s=15.0)
-@given(policy=st.sampled_from(["oracle", "random-walk", "frontier", "cost-utility", "teleport"]),
-       extra=flags(EVAL_FLAGS))
+@given(
+    policy=st.sampled_from(["oracle", "random-walk", "frontier", "cost-utility", "teleport"]), extra=flags(EVAL_FLAGS)
+)
 def test_eval_flags_run_one_episode_or_refuse(cli_paths, policy, extra):
-    argv = ["eval", "--dataset", DATASET, "--episodes", "1", "--frame", "24x32", "--set", "sim.max_steps=30",
-            "--policy", policy, *extra]
+    argv = [
+        "eval",
+        "--dataset",
+        DATASET,
+        "--episodes",
+        "1",
+        "--frame",
+        "24x32",
+        "--set",
+        "sim.max_steps=30",
+        "--policy",
+        policy,
+        *extra,
+    ]
     code, _, err = _run_cli(argv, cli_paths)
     event(f"{'eval' if code >= 0 else 'argparse'} exit {abs(code)}")
     _check_cli(argv, code, err, lines_allowed=3)  # a status line and a progress bar may precede the error

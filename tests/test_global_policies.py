@@ -1,26 +1,36 @@
 import numpy as np
+import pytest
 
 from l3mvn.agent.frontiers import Frontier
 from l3mvn.agent.mapping import SemanticMap
-from l3mvn.core.config import PolicyConfig
-from l3mvn.run.registry import check_options
 from l3mvn.agent.policies.global_policies import CostUtility, NearestFrontier, RandomSample
+from l3mvn.core.config import PolicyConfig
 from l3mvn.core.errors import L3MVNError
-
-import pytest
+from l3mvn.run.registry import check_options
 
 
 def _map(explored: np.ndarray, obstacle: np.ndarray) -> SemanticMap:
     n = explored.shape[0]
-    return SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros_like(explored),
-                       categories=np.zeros((0, n, n), bool), category_names=(), looked=explored, resolution_m=0.05,
-                       start_xy=(0.0, 0.0), agent_cell=(n // 2, n // 2), agent_heading=0.0,
-                       local_cells=n, footprint_radius_cells=3)
+    return SemanticMap(
+        obstacle=obstacle,
+        explored=explored,
+        visited=np.zeros_like(explored),
+        categories=np.zeros((0, n, n), bool),
+        category_names=(),
+        looked=explored,
+        resolution_m=0.05,
+        start_xy=(0.0, 0.0),
+        agent_cell=(n // 2, n // 2),
+        agent_heading=0.0,
+        local_cells=n,
+        footprint_radius_cells=3,
+    )
 
 
 def _frontier(i, distance, cost, s_cu):
-    return Frontier(id=i, cells=np.array([[i, i]]), center=(i, i), size=10, distance_m=distance,
-                    utility=10.0, cost=cost, s_cu=s_cu)
+    return Frontier(
+        id=i, cells=np.array([[i, i]]), center=(i, i), size=10, distance_m=distance, utility=10.0, cost=cost, s_cu=s_cu
+    )
 
 
 def test_nearest_frontier_ranks_by_travel_cost_and_cost_utility_by_s_cu():

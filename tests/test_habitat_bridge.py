@@ -20,13 +20,15 @@ import numpy as np
 import pytest
 
 from l3mvn.core.config import Config, SimConfig
-from l3mvn.world.episodes import generate_episodes
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.types import Pose
 from l3mvn.run.registry import make_policy
 from l3mvn.run.runner import Runner
+from l3mvn.run.session import EpisodeSession
+from l3mvn.world.episode import Episode
+from l3mvn.world.episodes import generate_episodes
 from l3mvn.world.scenes.procedural import generate_house
 from l3mvn.world.scenes.scene import SceneMap
-from l3mvn.run.session import EpisodeSession
 from l3mvn.world.sim import habitat_server as wire
 from l3mvn.world.sim.habitat_bridge import (
     ServerProcess,
@@ -38,8 +40,6 @@ from l3mvn.world.sim.habitat_bridge import (
 from l3mvn.world.sim.simulator import BuiltinSimulator
 from l3mvn.world.task import ObjectNavTask
 from l3mvn.world.task.regions import geodesic_field
-from l3mvn.core.types import Pose
-from l3mvn.world.episode import Episode
 
 SEED = 3
 CFG = SimConfig(frame_height=60, frame_width=80)
@@ -70,9 +70,9 @@ def _open_pose(scene: SceneMap) -> Pose:
 # --- the wire format ---------------------------------------------------------------------------------
 def _roundtrip(header, arrays):
     data = b"".join(wire.pack(header, arrays))
-    header_len, payload_len = wire.parse_prefix(data[:wire.PREFIX.size])
-    body = data[wire.PREFIX.size:]
-    return wire.parse_body(body[:header_len], bytearray(body[header_len:header_len + payload_len]))
+    header_len, payload_len = wire.parse_prefix(data[: wire.PREFIX.size])
+    body = data[wire.PREFIX.size :]
+    return wire.parse_body(body[:header_len], bytearray(body[header_len : header_len + payload_len]))
 
 
 def test_frames_carry_json_and_raw_arrays_of_every_wire_dtype():
@@ -119,8 +119,14 @@ def test_builtin_server_gives_the_in_process_observations(house):
     start = _open_pose(house)
     episode = Episode(1, house.name, house.floor, start, house.present_goals()[0])
     ref = BuiltinSimulator(house, CFG)
-    actions = (["look_down"] * 3 + ["turn_left", "look_up"] + ["move_forward"] * 40 + ["turn_right"] * 2
-               + ["move_forward"] * 8 + ["stop"])
+    actions = (
+        ["look_down"] * 3
+        + ["turn_left", "look_up"]
+        + ["move_forward"] * 40
+        + ["turn_right"] * 2
+        + ["move_forward"] * 8
+        + ["stop"]
+    )
     with _start(house) as env:
         assert env.server.hello["backend"] == "builtin" and env.info["categories"] == list(house.categories)
         pairs = [(env.reset(episode), ref.reset(episode))]
@@ -133,8 +139,12 @@ def test_builtin_server_gives_the_in_process_observations(house):
             assert got.pose.y == pytest.approx(want.pose.y, abs=1e-9)
             assert math.cos(got.pose.heading - want.pose.heading) == pytest.approx(1.0, abs=1e-12)
             assert got.tilt == pytest.approx(want.tilt, abs=1e-12)
-            assert (got.goal, got.step, got.collided, got.categories) == (want.goal, want.step, want.collided,
-                                                                          want.categories)
+            assert (got.goal, got.step, got.collided, got.categories) == (
+                want.goal,
+                want.step,
+                want.collided,
+                want.categories,
+            )
             collisions += got.collided
         assert collisions > 0, "the walk should reach a wall"
         assert env.path_length_m == pytest.approx(ref.path_length_m, abs=1e-9) and env.path_length_m > 1.0
@@ -154,8 +164,9 @@ def test_an_oracle_episode_over_the_bridge_scores_as_in_process(house):
     want = Runner(config).run(house, episode, "oracle")
     task = ObjectNavTask(house, config)
     with start_environment(builtin_command(), house, f"procedural:{SEED}", config.sim) as env:
-        session = EpisodeSession(env, task, make_policy("oracle", env, task, config), policy_name="oracle",
-                                 config_hash="")
+        session = EpisodeSession(
+            env, task, make_policy("oracle", env, task, config), policy_name="oracle", config_hash=""
+        )
         session.start(episode)
         got = session.run()
     assert want.success == 1.0 and want.steps > 10
@@ -194,8 +205,12 @@ def test_a_refused_request_is_one_line_and_the_server_goes_on(house):
             server.request("reset", position=[0, 0, 0], rotation=[1, 0, 0, 0])
         with pytest.raises(L3MVNError, match="unknown request 'teleport'; valid: load, reset, step"):
             server.request("teleport")
-        reply, _ = server.request("load", scene=f"procedural:{SEED}", categories=list(house.categories),
-                                  sim={"frame_height": 30, "frame_width": 40})
+        reply, _ = server.request(
+            "load",
+            scene=f"procedural:{SEED}",
+            categories=list(house.categories),
+            sim={"frame_height": 30, "frame_width": 40},
+        )
         assert reply["ok"] and reply["navigable_area_m2"] > 10
         with pytest.raises(L3MVNError, match="step failed: unknown action 'fly'"):
             server.request("step", action="fly")
@@ -229,8 +244,11 @@ def test_a_hung_server_is_stopped_after_the_timeout(house):
     env.server.timeout_s = 1.5  # sim.server_timeout_s, once the (slower) start and load are done
     os.kill(env.server.pid, signal.SIGSTOP)
     t0 = time.monotonic()
-    with pytest.raises(L3MVNError, match=r"builtin server answered no step request within 1.5 s "
-                                         r"\(sim.server_timeout_s\); stopped it"):
+    with pytest.raises(
+        L3MVNError,
+        match=r"builtin server answered no step request within 1.5 s "
+        r"\(sim.server_timeout_s\); stopped it",
+    ):
         env.step("move_forward")
     assert 1.4 < time.monotonic() - t0 < 10
     assert env.server._proc.returncode == -signal.SIGKILL
@@ -238,18 +256,25 @@ def test_a_hung_server_is_stopped_after_the_timeout(house):
 
 def test_a_server_that_exits_at_start_names_its_last_words(tmp_path, house):
     script = tmp_path / "server.py"
-    script.write_text("import sys\nsys.stderr.write('Traceback...\\nImportError: libGL.so.1: cannot open\\n')\n"
-                      "sys.exit(3)\n")
-    with pytest.raises(L3MVNError, match=r"^habitat server exited with code 3 during start: "
-                                         r"ImportError: libGL.so.1: cannot open$"):
+    script.write_text(
+        "import sys\nsys.stderr.write('Traceback...\\nImportError: libGL.so.1: cannot open\\n')\nsys.exit(3)\n"
+    )
+    with pytest.raises(
+        L3MVNError,
+        match=r"^habitat server exited with code 3 during start: "
+        r"ImportError: libGL.so.1: cannot open$",
+    ):
         start_environment([sys.executable, str(script)], house, "x.glb", CFG)
 
 
 # --- --habitat-python -------------------------------------------------------------------------------------
-@pytest.mark.parametrize("make, message", [
-    (lambda d: d / "nope" / "python", r"--habitat-python '.*nope/python': no such file; give the python of"),
-    (lambda d: d, r"--habitat-python '.*' is not an executable file"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda d: d / "nope" / "python", r"--habitat-python '.*nope/python': no such file; give the python of"),
+        (lambda d: d, r"--habitat-python '.*' is not an executable file"),
+    ],
+)
 def test_a_bad_habitat_python_is_one_line(tmp_path, house, make, message):
     with pytest.raises(L3MVNError, match=message) as err:
         habitat_environment(make(tmp_path), house, "scene.glb", CFG)
@@ -266,8 +291,11 @@ def test_a_python_without_habitat_sim_is_one_line(house):
     pytest.importorskip("numpy")
     if _has_module("habitat_sim"):
         pytest.skip("this interpreter has habitat_sim")
-    with pytest.raises(L3MVNError, match=r"^habitat server \(.*python.*\) could not start: "
-                                         r"ModuleNotFoundError: No module named 'habitat_sim'$"):
+    with pytest.raises(
+        L3MVNError,
+        match=r"^habitat server \(.*python.*\) could not start: "
+        r"ModuleNotFoundError: No module named 'habitat_sim'$",
+    ):
         habitat_environment(sys.executable, house, "scene.glb", CFG)
 
 
@@ -283,8 +311,9 @@ def _has_module(name: str) -> bool:
 
 
 # --- real habitat-sim (``make habitat``) ------------------------------------------------------------------
-needs_habitat = pytest.mark.skipif(not HABITAT_PYTHON.exists(),
-                                   reason=f"habitat-sim is not built ({HABITAT_PYTHON} is missing: make habitat)")
+needs_habitat = pytest.mark.skipif(
+    not HABITAT_PYTHON.exists(), reason=f"habitat-sim is not built ({HABITAT_PYTHON} is missing: make habitat)"
+)
 
 
 @pytest.fixture(scope="module")
@@ -312,8 +341,17 @@ def habitat(exported):
 def test_habitat_moves_and_sees_as_our_renderer_on_the_same_scan(exported, habitat):
     assert habitat.server.hello["backend"] == "habitat_sim" and habitat.info["navigable_area_m2"] > 10
     ref = BuiltinSimulator(habitat.scene, CFG)
-    actions = ["turn_left", "look_down", "look_down", "look_down", "look_up", "turn_right", "turn_right",
-               "move_forward", "move_forward"]
+    actions = [
+        "turn_left",
+        "look_down",
+        "look_down",
+        "look_down",
+        "look_up",
+        "turn_right",
+        "turn_right",
+        "move_forward",
+        "move_forward",
+    ]
     for episode in exported.episodes:
         pairs = [(habitat.reset(episode), ref.reset(episode))] + [(habitat.step(a), ref.step(a)) for a in actions]
         assert habitat.path_length_m == pytest.approx(ref.path_length_m, abs=1e-3) and ref.path_length_m > 0
@@ -389,3 +427,19 @@ def test_habitat_keeps_the_passages_our_grid_keeps(tmp_path):
                 ratios[episode.key] = got / episode.geodesic_distance_m
     assert len(ratios) == 8 and "procedural-0001/0/0" in ratios
     assert all(0.95 < r < 1.05 for r in ratios.values()), ratios
+
+
+@pytest.mark.parametrize(("op", "request_", "message"), [
+    ("op_reset", {"rotation": [1, 0, 0, 0]}, "position must be three numbers"),
+    ("op_reset", {"position": [1, 0, 1], "rotation": "north"}, "rotation must be a (w, x, y, z) quaternion"),
+    ("op_reset", {"position": [1, 0, float("nan")], "rotation": [1, 0, 0, 0]}, "position must be finite"),
+    ("op_geodesic", {"start": "123", "goals": [[1, 0, 1]]}, "a point must be three numbers"),
+])
+def test_the_builtin_server_refuses_a_malformed_request_in_one_line(op, request_, message):
+    from l3mvn.world.sim.builtin_server import BuiltinBackend
+
+    backend = BuiltinBackend()
+    scene = generate_house(0)
+    backend.op_load({"scene": "procedural:0", "categories": list(scene.categories), "sim": {}})
+    with pytest.raises(wire.RequestError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        getattr(backend, op)(request_)

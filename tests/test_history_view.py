@@ -9,11 +9,11 @@ import time
 import cv2
 import numpy as np
 import pytest
-
 from conftest import serve_dashboard
-from l3mvn_studio.history_view import history_picture
+
 from l3mvn.core.config import Config
 from l3mvn.core.errors import L3MVNError
+from l3mvn_studio.history_view import history_picture
 
 
 @pytest.fixture(scope="module")

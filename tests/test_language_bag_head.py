@@ -14,17 +14,17 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 import numpy as np
 import pytest
 import torch
-
 from conftest import write_frontier_file
-from l3mvn.run.cli import main
-from l3mvn.core.config import PolicyConfig
-from l3mvn.core.errors import L3MVNError
+
 from l3mvn.agent.language import GOALS, make_scorer, train_any_head
 from l3mvn.agent.language.cooccurrence import load_stats
 from l3mvn.agent.language.frontier_head import house_split, train_frontier_head
 from l3mvn.agent.language.head import SHIPPED_HEADS, bag_features, load_head
 from l3mvn.agent.language.rooms import split_of
 from l3mvn.agent.language.train_head import train_head
+from l3mvn.core.config import PolicyConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.cli import main
 
 VALID = "valid: frontiers, rooms, frontiers-bag, rooms-bag"
 
@@ -76,8 +76,14 @@ def test_the_policy_scores_with_a_bag_head_without_importing_the_embedder(kind):
     if not SHIPPED_HEADS[kind].exists():
         pytest.skip(f"{kind} head not shipped")
     code = _NO_EMBEDDER.replace("HEAD", kind)
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=False,
-                         env={**os.environ, "HF_HUB_OFFLINE": "1"})
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        env={**os.environ, "HF_HUB_OFFLINE": "1"},
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     result = json.loads(out.stdout.strip().splitlines()[-1])
     assert result["loaded"] == [] and result["encoders"] == 0
@@ -97,9 +103,11 @@ def _rooms(tmp_path):
             names[split_of(name)].append(name)
     lines = []
     for building in names["train"] + names["val"]:
-        lines += [{"building": building, "room": "r1", "room_type": "bathroom", "objects": ["toilet", "sink", "towel"]},
-                  {"building": building, "room": "r2", "room_type": "bathroom", "objects": ["toilet", "shower"]},
-                  {"building": building, "room": "r3", "room_type": "bedroom", "objects": ["bed", "desk", "bottle"]}]
+        lines += [
+            {"building": building, "room": "r1", "room_type": "bathroom", "objects": ["toilet", "sink", "towel"]},
+            {"building": building, "room": "r2", "room_type": "bathroom", "objects": ["toilet", "shower"]},
+            {"building": building, "room": "r3", "room_type": "bedroom", "objects": ["bed", "desk", "bottle"]},
+        ]
     rooms = tmp_path / "rooms.jsonl"
     rooms.write_text("".join(json.dumps(r) + "\n" for r in lines))
     thor = tmp_path / "thor.json"
@@ -109,8 +117,18 @@ def _rooms(tmp_path):
 
 def test_room_bag_training_is_deterministic_for_a_seed_and_learns_the_rooms(tmp_path):
     rooms, thor = _rooms(tmp_path)
-    runs = [train_head(gibson_rooms=rooms, thor_metadata=thor, out=tmp_path / f"{n}.pt", epochs=8, seed=seed,
-                       batch_size=4, bag=True) for n, seed in (("a", 5), ("b", 5), ("c", 6))]
+    runs = [
+        train_head(
+            gibson_rooms=rooms,
+            thor_metadata=thor,
+            out=tmp_path / f"{n}.pt",
+            epochs=8,
+            seed=seed,
+            batch_size=4,
+            bag=True,
+        )
+        for n, seed in (("a", 5), ("b", 5), ("c", 6))
+    ]
     (ha, ma), (hb, mb), (hc, _) = (load_head(tmp_path / f"{n}.pt") for n in "abc")
     sa, sb, sc = ha.state_dict(), hb.state_dict(), hc.state_dict()
     assert all(torch.equal(sa[k], sb[k]) for k in sa) and runs[0] == {**runs[1], "path": runs[0]["path"]}
@@ -144,8 +162,11 @@ def test_frontier_bag_training_is_deterministic_and_never_reads_the_test_house(t
 
 
 def test_a_bad_head_name_is_one_line_naming_the_valid_heads(capsys):
-    for make in (lambda: make_scorer("feedforward", head="room-bag"), lambda: PolicyConfig(head="room-bag"),
-                 lambda: train_any_head("room-bag")):
+    for make in (
+        lambda: make_scorer("feedforward", head="room-bag"),
+        lambda: PolicyConfig(head="room-bag"),
+        lambda: train_any_head("room-bag"),
+    ):
         with pytest.raises(L3MVNError, match=VALID) as err:
             make()
         assert "\n" not in str(err.value)

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.language.cooccurrence import STATS_PATH, build_stats, load_stats, stats_table
 from l3mvn.agent.language.rooms import Room, load_gibson_rooms, split_of
 from l3mvn.agent.language.vocabulary import GOALS
+from l3mvn.core.errors import L3MVNError
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 GIBSON = SHARED / "data" / "room_objects" / "gibson_3dsg_rooms.jsonl"
@@ -24,9 +24,13 @@ def test_shipped_list_has_15_objects_ordered_by_entropy():
     assert len(stats.informative) == 15
     entropies = [stats.objects[o].entropy for o in stats.informative]
     assert entropies == sorted(entropies)
-    outside = [o.entropy for o in stats.objects.values()
-               if o.name not in stats.informative and o.rooms >= stats.provenance["min_rooms"]
-               and o.name in stats.provenance["candidates"]]
+    outside = [
+        o.entropy
+        for o in stats.objects.values()
+        if o.name not in stats.informative
+        and o.rooms >= stats.provenance["min_rooms"]
+        and o.name in stats.provenance["candidates"]
+    ]
     assert min(outside) >= entropies[-1]
 
 

@@ -10,18 +10,18 @@ import json
 import numpy as np
 import pytest
 import torch
-
 from conftest import write_frontier_file
-from l3mvn.core.config import Config, FrontierConfig
-from l3mvn.core.errors import L3MVNError
-from l3mvn.run.eval.frontier_data import label_frontiers, read_done, window_object_distances
+
 from l3mvn.agent.frontiers import extract_frontiers
 from l3mvn.agent.language.frontier_file import frontier_query, load_choices
 from l3mvn.agent.language.frontier_head import house_split, train_frontier_head
 from l3mvn.agent.language.vocabulary import GOALS
 from l3mvn.agent.mapping import SemanticMap
-from l3mvn.world.baselines import object_distances
 from l3mvn.core.categories import GIBSON_CATEGORIES
+from l3mvn.core.config import Config, FrontierConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.eval.frontier_data import label_frontiers, read_done, window_object_distances
+from l3mvn.world.baselines import object_distances
 from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.task import ObjectNavTask
 
@@ -34,7 +34,7 @@ def _house() -> SceneMap:
     nav = np.zeros((SIZE, SIZE), bool)
     r0, r1, c0, c1 = HALL
     nav[r0 + 3 : r1 - 3, c0 + 3 : c1 - 3] = True
-    nav[40:160, 5:c0 - 3] = True  # left room (door A)
+    nav[40:160, 5 : c0 - 3] = True  # left room (door A)
     nav[40:160, c1 + 3 : 195] = True  # right room (door B)
     nav[DOOR_ROWS, c0 - 4 : c0 + 4] = True
     nav[DOOR_ROWS, c1 - 4 : c1 + 4] = True
@@ -58,18 +58,36 @@ def _agent_map() -> SemanticMap:
     cats[GIBSON_CATEGORIES.index("sink"), 95:98, 66:69] = True
     cats[GIBSON_CATEGORIES.index("couch"), 104:107, 131:134] = True
     half = SIZE // 2
-    return SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros_like(explored), categories=cats,
-                       category_names=GIBSON_CATEGORIES, looked=explored, resolution_m=RES,
-                       start_xy=((half) * RES, (half) * RES), agent_cell=(100, 100), agent_heading=0.0,
-                       local_cells=SIZE, footprint_radius_cells=2)
+    return SemanticMap(
+        obstacle=obstacle,
+        explored=explored,
+        visited=np.zeros_like(explored),
+        categories=cats,
+        category_names=GIBSON_CATEGORIES,
+        looked=explored,
+        resolution_m=RES,
+        start_xy=((half) * RES, (half) * RES),
+        agent_cell=(100, 100),
+        agent_heading=0.0,
+        local_cells=SIZE,
+        footprint_radius_cells=2,
+    )
 
 
 def _frontiers(sem_map: SemanticMap, cfg: FrontierConfig | None = None):
     cfg = cfg or FrontierConfig()
     rows, cols = np.indices(sem_map.obstacle.shape)
     dist = np.hypot(rows - 100, cols - 100) * RES  # straight line stands in for the planner's field
-    found = extract_frontiers(sem_map.explored, sem_map.obstacle, sem_map.agent_cell, dist, sem_map.categories,
-                              sem_map.category_names, cfg, resolution_m=RES)
+    found = extract_frontiers(
+        sem_map.explored,
+        sem_map.obstacle,
+        sem_map.agent_cell,
+        dist,
+        sem_map.categories,
+        sem_map.category_names,
+        cfg,
+        resolution_m=RES,
+    )
     assert len(found) == 2
     return sorted(found, key=lambda f: f.center[1])  # door A (left) first
 
@@ -100,7 +118,9 @@ def test_labels_put_the_toilet_behind_door_a_and_the_bed_behind_door_b():
     assert a["goal_m"]["toilet"] < b["goal_m"]["toilet"] - 3.0
     assert b["goal_m"]["bed"] < a["goal_m"]["bed"] - 3.0
     assert a["goal_m"]["tv"] is None  # the house has none
-    assert a["objects"] == {"sink": pytest.approx(a["objects"]["sink"])} and a["query"] == "This frontier contains sink."
+    assert (
+        a["objects"] == {"sink": pytest.approx(a["objects"]["sink"])} and a["query"] == "This frontier contains sink."
+    )
 
 
 def test_house_split_is_by_house_and_never_puts_one_house_on_two_sides(tmp_path):
@@ -130,8 +150,17 @@ def test_training_is_deterministic_for_a_seed_and_learns_the_toilet_side(tmp_pat
 def test_resume_keeps_finished_episodes_and_drops_a_block_cut_off(tmp_path):
     path = tmp_path / "f.jsonl"
     done = json.dumps({"house": "H", "episode": "H/0/0", "seed": 0, "goal": "bed", "mapped": [], "frontiers": []})
-    path.write_text("\n".join([done, json.dumps({"done": "H/0/0", "seed": 0, "choices": 1}),
-                               done.replace("H/0/0", "H/0/1"), '{"house": "H", "epis']) + "\n")
+    path.write_text(
+        "\n".join(
+            [
+                done,
+                json.dumps({"done": "H/0/0", "seed": 0, "choices": 1}),
+                done.replace("H/0/0", "H/0/1"),
+                '{"house": "H", "epis',
+            ]
+        )
+        + "\n"
+    )
     finished, keep = read_done(path)
     assert finished == {("H/0/0", 0)} and len(keep) == 2
 
@@ -158,8 +187,15 @@ def test_generation_is_deterministic_for_a_seed_and_resumes_where_it_stopped(tin
     done_at = next(i for i, line in enumerate(lines) if '"done"' in line)
     second.write_text("\n".join(lines[: done_at + 1] + [lines[-1][:25]]) + "\n")
     calls = []
-    generate_frontier_data(str(tiny_dataset), "val", second, houses=["Tiny"], limit=2, resume=True,
-                           progress=lambda done, total: calls.append((done, total)))
+    generate_frontier_data(
+        str(tiny_dataset),
+        "val",
+        second,
+        houses=["Tiny"],
+        limit=2,
+        resume=True,
+        progress=lambda done, total: calls.append((done, total)),
+    )
     assert second.read_text() == first.read_text()
     assert calls[-1] == (1, 1)
     row = next(json.loads(line) for line in lines if '"frontiers"' in line)

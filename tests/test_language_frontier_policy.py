@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.frontiers import Frontier
 from l3mvn.agent.language import GOALS, make_scorer
 from l3mvn.agent.language.head import GoalHead, save_head
 from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
+from l3mvn.core.errors import L3MVNError
 
 
 @pytest.fixture(scope="module")
@@ -27,8 +27,17 @@ def head_file(tmp_path_factory):
 
 
 def _frontier(i: int, objects: tuple[str, ...], cost: float, s_cu: float, utility: float = 5.0) -> Frontier:
-    return Frontier(id=i, cells=np.array([[10, 10 + i]]), center=(10, 10 + i), size=int(utility), distance_m=cost,
-                    utility=utility, cost=cost, s_cu=s_cu, objects=objects)
+    return Frontier(
+        id=i,
+        cells=np.array([[10, 10 + i]]),
+        center=(10, 10 + i),
+        size=int(utility),
+        distance_m=cost,
+        utility=utility,
+        cost=cost,
+        s_cu=s_cu,
+        objects=objects,
+    )
 
 
 def test_frontier_head_queries_name_exactly_each_frontier_objects(head_file):
@@ -43,8 +52,11 @@ def test_frontier_head_queries_name_exactly_each_frontier_objects(head_file):
 
 def test_expected_selection_takes_least_travel_plus_expected_metres(head_file):
     policy = LanguageFrontierPolicy("l3mvn-ff", "feedforward", selection="expected", head=str(head_file))
-    frontiers = [_frontier(0, ("sink",), 1.0, 1.0), _frontier(1, ("couch", "vase"), 2.0, 0.5, utility=60.0),
-                 _frontier(2, ("bed",), 3.0, 0.0)]
+    frontiers = [
+        _frontier(0, ("sink",), 1.0, 1.0),
+        _frontier(1, ("couch", "vase"), 2.0, 0.5, utility=60.0),
+        _frontier(2, ("bed",), 3.0, 0.0),
+    ]
     sel = policy.select(frontiers, None, "toilet", np.random.default_rng(0))
     metres = policy.scorer.expected_distance([f.objects for f in frontiers])[:, GOALS.index("toilet")]
     total = np.array([1.0, 2.0, 3.0]) - np.array([5.0, 60.0, 5.0]) / policy.cu_lambda + metres  # C - U / lambda + prior
@@ -60,8 +72,11 @@ def test_a_flat_head_under_expected_selection_chooses_exactly_as_cost_utility(tm
     with torch.no_grad():
         head.net[-1].weight.zero_()
         head.net[-1].bias.fill_(4.0)  # the same 4 m beyond every frontier: no information
-    path = save_head(head, {"kind": "frontiers", "object_filter": "all", "encoder": "minilm", "goals": list(GOALS)},
-                     tmp_path / "flat.pt")
+    path = save_head(
+        head,
+        {"kind": "frontiers", "object_filter": "all", "encoder": "minilm", "goals": list(GOALS)},
+        tmp_path / "flat.pt",
+    )
     policy = LanguageFrontierPolicy("l3mvn-ff", "feedforward", selection="expected", head=str(path), cu_lambda=40.0)
     # S_CU = U - 40 C: the big far frontier (80 - 40 * 1.5 = 20) beats the small near one (10 - 40 * 0.5 = -10).
     frontiers = [_frontier(0, ("sink",), 0.5, 0.0, utility=10.0), _frontier(1, ("bed",), 1.5, 1.0, utility=80.0)]

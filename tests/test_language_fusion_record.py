@@ -5,8 +5,8 @@ import json
 
 import numpy as np
 import pytest
-
 from conftest import first_frontier_choice
+
 from l3mvn.agent.frontiers import Frontier, Fusion
 from l3mvn.agent.language import GOALS
 from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
@@ -14,10 +14,20 @@ from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
 RNG = np.random.default_rng(0)
 
 
-def _frontier(i: int, objects: tuple[str, ...], s_cu: float, utility: float = 10.0,
-              cost: float | None = None) -> Frontier:
-    return Frontier(id=i, cells=np.array([[i, i]]), center=(i, i), size=10, distance_m=1.0 + i,
-                    utility=utility, cost=1.0 + i if cost is None else cost, s_cu=s_cu, objects=objects)
+def _frontier(
+    i: int, objects: tuple[str, ...], s_cu: float, utility: float = 10.0, cost: float | None = None
+) -> Frontier:
+    return Frontier(
+        id=i,
+        cells=np.array([[i, i]]),
+        center=(i, i),
+        size=10,
+        distance_m=1.0 + i,
+        utility=utility,
+        cost=1.0 + i if cost is None else cost,
+        s_cu=s_cu,
+        objects=objects,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -37,13 +47,17 @@ def _paper_from_record(fusion: Fusion) -> tuple[str, int, np.ndarray]:
     return "fused", int(np.argmax(fused)), fused
 
 
-@pytest.mark.parametrize(("objects", "s_cu", "goal", "branch"), [
-    ((("chair",), ("sink", "bathtub", "shower")), (1.0, 0.0), "toilet", "language"),
-    ((("sink", "bathtub", "shower"), ("toilet", "sink")), (0.2, 0.9), "tv", "exploration"),
-    (((), ("chair",), ()), (0.1, 0.8, 0.5), "bed", "fused"),
-])
-def test_the_paper_rule_recomputed_from_its_record_gives_the_policys_choice_and_scores(rooms, objects, s_cu, goal,
-                                                                                       branch):
+@pytest.mark.parametrize(
+    ("objects", "s_cu", "goal", "branch"),
+    [
+        ((("chair",), ("sink", "bathtub", "shower")), (1.0, 0.0), "toilet", "language"),
+        ((("sink", "bathtub", "shower"), ("toilet", "sink")), (0.2, 0.9), "tv", "exploration"),
+        (((), ("chair",), ()), (0.1, 0.8, 0.5), "bed", "fused"),
+    ],
+)
+def test_the_paper_rule_recomputed_from_its_record_gives_the_policys_choice_and_scores(
+    rooms, objects, s_cu, goal, branch
+):
     frontiers = [_frontier(i, o, c) for i, (o, c) in enumerate(zip(objects, s_cu))]
     sel = rooms.select(frontiers, None, goal, RNG)
     fusion = sel.fusion
@@ -59,9 +73,11 @@ def test_the_paper_rule_recomputed_from_its_record_gives_the_policys_choice_and_
 
 def test_the_expected_rule_shows_cost_bonus_and_the_heads_metres_of_every_frontier():
     policy = LanguageFrontierPolicy("l3mvn-ff", "feedforward", selection="expected", head="frontiers")
-    frontiers = [_frontier(0, ("chair", "couch"), 1.0, utility=40.0, cost=2.0),
-                 _frontier(1, ("sink", "towel"), 0.5, utility=10.0, cost=3.5),
-                 _frontier(2, (), 0.0, utility=5.0, cost=6.0)]
+    frontiers = [
+        _frontier(0, ("chair", "couch"), 1.0, utility=40.0, cost=2.0),
+        _frontier(1, ("sink", "towel"), 0.5, utility=10.0, cost=3.5),
+        _frontier(2, (), 0.0, utility=5.0, cost=6.0),
+    ]
     sel = policy.select(frontiers, None, "toilet", RNG)
     fusion = sel.fusion
     assert (fusion.rule, fusion.branch) == ("expected", "least total")
@@ -93,12 +109,31 @@ def test_the_official_rule_records_the_no_object_stand_in_it_compared():
 
 
 def test_the_fusion_line_names_the_bound_the_branch_and_the_winner_against_the_runner_up():
-    fusion = Fusion(rule="paper", branch="fused", choice=2, ids=(0, 1, 2), s_llm=(0.16, 0.10, 0.22),
-                    explore=(0.6, 0.2, 0.4), compared=(0.24, 0.18, 0.27), bound=(0.15, 0.30))
-    assert fusion.describe() == ("bound B = [0.15, 0.30]; max S_LLM 0.22 is inside B, so fused = "
-                                 "max(S_LLM, 0.15 + 0.15 x S_CU): F2 0.27 beats F0 0.24")
-    alone = Fusion(rule="paper", branch="language", choice=0, ids=(4,), s_llm=(0.5,), explore=(1.0,),
-                   compared=(0.5,), bound=(0.15, 0.30), exploration="nearest")
+    fusion = Fusion(
+        rule="paper",
+        branch="fused",
+        choice=2,
+        ids=(0, 1, 2),
+        s_llm=(0.16, 0.10, 0.22),
+        explore=(0.6, 0.2, 0.4),
+        compared=(0.24, 0.18, 0.27),
+        bound=(0.15, 0.30),
+    )
+    assert fusion.describe() == (
+        "bound B = [0.15, 0.30]; max S_LLM 0.22 is inside B, so fused = "
+        "max(S_LLM, 0.15 + 0.15 x S_CU): F2 0.27 beats F0 0.24"
+    )
+    alone = Fusion(
+        rule="paper",
+        branch="language",
+        choice=0,
+        ids=(4,),
+        s_llm=(0.5,),
+        explore=(1.0,),
+        compared=(0.5,),
+        bound=(0.15, 0.30),
+        exploration="nearest",
+    )
     assert alone.describe().endswith("language alone decides: F4 0.50 (the only frontier)")
 
 

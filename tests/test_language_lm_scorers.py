@@ -8,12 +8,16 @@ import pytest  # noqa: E402
 import torch  # noqa: E402
 from tokenizers import Tokenizer, models, pre_tokenizers, processors, trainers  # noqa: E402
 from transformers import (  # noqa: E402
-    GPT2Config, GPT2LMHeadModel, PreTrainedTokenizerFast, RobertaConfig, RobertaForMaskedLM,
+    GPT2Config,
+    GPT2LMHeadModel,
+    PreTrainedTokenizerFast,
+    RobertaConfig,
+    RobertaForMaskedLM,
 )
 
-from l3mvn.core.errors import L3MVNError  # noqa: E402
 from l3mvn.agent.language import GOALS, make_scorer  # noqa: E402
 from l3mvn.agent.language.queries import zero_shot_query  # noqa: E402
+from l3mvn.core.errors import L3MVNError  # noqa: E402
 
 CORPUS = [zero_shot_query(objs, g) for objs in [(), ("sink",), ("bed", "desk"), ("oven", "toilet")] for g in GOALS]
 CORPUS += [s.replace("A frontier area", "A room") for s in CORPUS]
@@ -30,20 +34,33 @@ def _tokenizer(specials):
 @pytest.fixture(scope="module")
 def tiny_mlm():
     tok = _tokenizer(["<s>", "<pad>", "</s>", "<unk>", "<mask>"])
-    tok.post_processor = processors.TemplateProcessing(
-        single="<s> $A </s>", special_tokens=[("<s>", 0), ("</s>", 2)])
-    fast = PreTrainedTokenizerFast(tokenizer_object=tok, bos_token="<s>", eos_token="</s>", pad_token="<pad>",
-                                   unk_token="<unk>", mask_token="<mask>")
+    tok.post_processor = processors.TemplateProcessing(single="<s> $A </s>", special_tokens=[("<s>", 0), ("</s>", 2)])
+    fast = PreTrainedTokenizerFast(
+        tokenizer_object=tok,
+        bos_token="<s>",
+        eos_token="</s>",
+        pad_token="<pad>",
+        unk_token="<unk>",
+        mask_token="<mask>",
+    )
     torch.manual_seed(0)
-    config = RobertaConfig(vocab_size=fast.vocab_size, hidden_size=16, num_hidden_layers=1, num_attention_heads=2,
-                           intermediate_size=32, max_position_embeddings=40, pad_token_id=1)
+    config = RobertaConfig(
+        vocab_size=fast.vocab_size,
+        hidden_size=16,
+        num_hidden_layers=1,
+        num_attention_heads=2,
+        intermediate_size=32,
+        max_position_embeddings=40,
+        pad_token_id=1,
+    )
     return fast, RobertaForMaskedLM(config).eval()
 
 
 @pytest.fixture(scope="module")
 def tiny_gpt2():
-    fast = PreTrainedTokenizerFast(tokenizer_object=_tokenizer(["<|endoftext|>", "<unk>"]),
-                                   eos_token="<|endoftext|>", unk_token="<unk>")
+    fast = PreTrainedTokenizerFast(
+        tokenizer_object=_tokenizer(["<|endoftext|>", "<unk>"]), eos_token="<|endoftext|>", unk_token="<unk>"
+    )
     torch.manual_seed(0)
     config = GPT2Config(vocab_size=fast.vocab_size, n_embd=16, n_layer=1, n_head=2, n_positions=40)
     return fast, GPT2LMHeadModel(config).eval()
@@ -102,8 +119,9 @@ def test_the_cache_hits_on_a_repeated_set(tiny_mlm):
     assert (scorer.cache_info().misses, scorer.cache_info().hits) == (6, 6)
 
 
-@pytest.mark.parametrize("name, model", [("mlm", "roberta-large"), ("mlm", "/nonexistent/roberta"),
-                                         ("causal", "gpt2-large")])
+@pytest.mark.parametrize(
+    "name, model", [("mlm", "roberta-large"), ("mlm", "/nonexistent/roberta"), ("causal", "gpt2-large")]
+)
 def test_a_missing_model_raises_a_clear_error(name, model):
     with pytest.raises(L3MVNError, match=f"cannot load .*{model}.*huggingface-cli download"):
         make_scorer(name, model=model)

@@ -5,32 +5,66 @@ import re
 import numpy as np
 import pytest
 
-from l3mvn_studio.language_panel import (
-    BAR_PX, SHOWN_FRONTIERS, bar_html, frontier_card_html, fusion_html, language_html, shown_frontiers,
-)
-from l3mvn_studio.state import FrontierMarker, MapView
 from l3mvn.agent.frontiers import Fusion
 from l3mvn.agent.language import GOALS
 from l3mvn.run.viz import category_color
+from l3mvn_studio.language_panel import (
+    BAR_PX,
+    SHOWN_FRONTIERS,
+    bar_html,
+    frontier_card_html,
+    fusion_html,
+    language_html,
+    shown_frontiers,
+)
+from l3mvn_studio.state import FrontierMarker, MapView
 
-FUSION = Fusion(rule="paper", branch="fused", choice=2, ids=(0, 1, 2, 3, 4), s_llm=(0.16, 0.10, 0.22, 0.05, 0.02),
-                explore=(0.6, 0.2, 0.4, 0.3, 0.0), compared=(0.24, 0.18, 0.27, 0.20, 0.15), bound=(0.15, 0.30))
+FUSION = Fusion(
+    rule="paper",
+    branch="fused",
+    choice=2,
+    ids=(0, 1, 2, 3, 4),
+    s_llm=(0.16, 0.10, 0.22, 0.05, 0.02),
+    explore=(0.6, 0.2, 0.4, 0.3, 0.0),
+    compared=(0.24, 0.18, 0.27, 0.20, 0.15),
+    bound=(0.15, 0.30),
+)
 
 
 def _marker(i: int, *, chosen: bool = False, metres: bool = False, objects=("sink", "towel")) -> FrontierMarker:
     scores = dict(zip(GOALS, np.roll([0.4, 0.2, 0.15, 0.1, 0.1, 0.05], i)))
     return FrontierMarker(
-        id=i, cell=(i, i), size=10, distance_m=1.0 + i, s_cu=FUSION.explore[i], s_llm=FUSION.s_llm[i],
-        fused=FUSION.compared[i], objects=tuple(objects),
+        id=i,
+        cell=(i, i),
+        size=10,
+        distance_m=1.0 + i,
+        s_cu=FUSION.explore[i],
+        s_llm=FUSION.s_llm[i],
+        fused=FUSION.compared[i],
+        objects=tuple(objects),
         queries={"all goals": f"This frontier contains {objects[0]}."},
-        reason="", chosen=chosen, llm_scores={g: float(p) for g, p in scores.items()},
-        expected_m={g: 2.0 + k for k, g in enumerate(GOALS)} if metres else {})
+        reason="",
+        chosen=chosen,
+        llm_scores={g: float(p) for g, p in scores.items()},
+        expected_m={g: 2.0 + k for k, g in enumerate(GOALS)} if metres else {},
+    )
 
 
 def _view(frontiers, fusion=FUSION, target="toilet", goal_kind="frontier") -> MapView:
-    return MapView(image=np.zeros((4, 4, 3), np.uint8), origin=(0, 0), scale=1, grid_shape=(4, 4), resolution_m=0.05,
-                   source="agent map", agent_cell=(0, 0), agent_heading=0.0, goal_kind=goal_kind,
-                   frontiers=tuple(frontiers), target=target, fusion=fusion)
+    return MapView(
+        image=np.zeros((4, 4, 3), np.uint8),
+        origin=(0, 0),
+        scale=1,
+        grid_shape=(4, 4),
+        resolution_m=0.05,
+        source="agent map",
+        agent_cell=(0, 0),
+        agent_heading=0.0,
+        goal_kind=goal_kind,
+        frontiers=tuple(frontiers),
+        target=target,
+        fusion=fusion,
+    )
 
 
 def test_a_policy_without_language_says_which_and_that_it_uses_none():
@@ -86,6 +120,8 @@ def test_a_bar_is_as_long_as_its_probability_and_text_is_escaped():
 
 @pytest.mark.parametrize("goal_kind", ["frontier", "target"])
 def test_the_whole_panel_is_one_well_formed_block(goal_kind):
-    html = language_html(_view([_marker(i, chosen=goal_kind == "frontier" and i == 2) for i in range(5)],
-                               goal_kind=goal_kind), "l3mvn-zs")
+    html = language_html(
+        _view([_marker(i, chosen=goal_kind == "frontier" and i == 2) for i in range(5)], goal_kind=goal_kind),
+        "l3mvn-zs",
+    )
     assert html.count("<div") == html.count("</div>") and html.count("<span") == html.count("</span>")

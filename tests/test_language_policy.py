@@ -2,18 +2,27 @@
 
 import numpy as np
 import pytest
-
 from conftest import first_frontier_choice
-from l3mvn.core.errors import L3MVNError
+
 from l3mvn.agent.frontiers import Frontier
-from l3mvn.core.config import PolicyConfig
-from l3mvn.run.registry import policy_names
 from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
+from l3mvn.core.config import PolicyConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.run.registry import policy_names
 
 
 def _frontier(i: int, objects: tuple[str, ...], s_cu: float, utility: float = 10.0) -> Frontier:
-    return Frontier(id=i, cells=np.array([[i, i]]), center=(i, i), size=10, distance_m=1.0 + i,
-                    utility=utility, cost=1.0 + i, s_cu=s_cu, objects=objects)
+    return Frontier(
+        id=i,
+        cells=np.array([[i, i]]),
+        center=(i, i),
+        size=10,
+        distance_m=1.0 + i,
+        utility=utility,
+        cost=1.0 + i,
+        s_cu=s_cu,
+        objects=objects,
+    )
 
 
 @pytest.fixture(scope="module")

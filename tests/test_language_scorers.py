@@ -7,8 +7,8 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from l3mvn.core.errors import L3MVNError  # noqa: E402
 from l3mvn.agent.language import GOALS, make_scorer, scorer_names  # noqa: E402
+from l3mvn.core.errors import L3MVNError  # noqa: E402
 
 SHIPPED = ("embedding", "roomtype", "feedforward")
 

@@ -2,22 +2,36 @@
 
 import pytest
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.language.queries import feedforward_query, zero_shot_query
 from l3mvn.agent.language.vocabulary import GOALS, canonical, check_goal, query_phrase, to_coco, to_gibson
 from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
+from l3mvn.core.errors import L3MVNError
 
 
 def test_goals_are_the_scene_goal_categories():
     assert GOALS == GOAL_CATEGORIES == ("chair", "couch", "potted plant", "bed", "toilet", "tv")
 
 
-@pytest.mark.parametrize("spelling, name", [
-    ("potted_plant", "potted plant"), ("dining-table", "dining table"), ("dining_table", "dining table"),
-    ("HousePlant", "potted plant"), ("Sofa", "couch"), ("sofa", "couch"), ("Television", "tv"),
-    ("tv_monitor", "tv"), ("SinkBasin", "sink"), ("ShowerHead", "shower"), ("chest_of_drawers", "dresser"),
-    ("TVStand", "tv stand"), ("ArmChair", "chair"), ("Fridge", "refrigerator"), ("  Bath_Tub ", "bathtub"),
-])
+@pytest.mark.parametrize(
+    "spelling, name",
+    [
+        ("potted_plant", "potted plant"),
+        ("dining-table", "dining table"),
+        ("dining_table", "dining table"),
+        ("HousePlant", "potted plant"),
+        ("Sofa", "couch"),
+        ("sofa", "couch"),
+        ("Television", "tv"),
+        ("tv_monitor", "tv"),
+        ("SinkBasin", "sink"),
+        ("ShowerHead", "shower"),
+        ("chest_of_drawers", "dresser"),
+        ("TVStand", "tv stand"),
+        ("ArmChair", "chair"),
+        ("Fridge", "refrigerator"),
+        ("  Bath_Tub ", "bathtub"),
+    ],
+)
 def test_every_source_spelling_folds_to_one_canonical_name(spelling, name):
     assert canonical(spelling) == name
 

@@ -26,12 +26,26 @@ SIDES: dict[str, set[str]] = {
 }
 # Within a side, lowest first; a unit may import units of lower layers of its own side only.
 LAYERS: dict[str, list[set[str]]] = {
-    "core": [{"errors"}, {"types", "config", "grid", "paths", "writing", "categories", "json_values", "plugins"}, {"camera"}],
+    "core": [
+        {"errors"},
+        {"types", "config", "grid", "paths", "writing", "categories", "json_values", "plugins"},
+        {"camera"},
+    ],
     "world": [{"episode", "scenes"}, {"sim"}, {"task"}, {"episodes"}, {"datasets"}, {"baselines"}],
-    "agent": [{"mapping", "frontiers", "planning", "language"}, {"decision", "perception", "looking"},
-              {"policies"}, {"modular"}],
-    "run": [{"events", "viz", "serving"}, {"session"}, {"registry"}, {"runner", "recording"}, {"eval", "audit"},
-            {"cli"}],
+    "agent": [
+        {"mapping", "frontiers", "planning", "language"},
+        {"decision", "perception", "looking"},
+        {"policies"},
+        {"modular"},
+    ],
+    "run": [
+        {"events", "viz", "serving"},
+        {"session"},
+        {"registry"},
+        {"runner", "recording"},
+        {"eval", "audit"},
+        {"cli"},
+    ],
     "studio": [{"*"}],
 }
 Unit = tuple[str, str]  # (side, package or module right under it)
@@ -57,8 +71,11 @@ def _imports(base: Path = ROOT) -> list[tuple[str, Unit, Unit]]:
             if own is None:  # l3mvn/__init__.py and the sides' own __init__
                 continue
             for node in ast.walk(ast.parse(path.read_text())):
-                names = [node.module] if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module else (
-                    [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+                names = (
+                    [node.module]
+                    if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
+                    else ([a.name for a in node.names] if isinstance(node, ast.Import) else [])
+                )
                 for name in names:
                     target = _unit(name)
                     if target is None and name.split(".")[0] == "l3mvn" and name != "l3mvn":
@@ -83,8 +100,11 @@ def _allowed(own: Unit, target: Unit) -> bool:
 
 
 def _problems(base: Path = ROOT) -> list[str]:
-    return [f"{file}: {'.'.join(own)} imports {'.'.join(target)}" for file, own, target in _imports(base)
-            if not _allowed(own, target)]
+    return [
+        f"{file}: {'.'.join(own)} imports {'.'.join(target)}"
+        for file, own, target in _imports(base)
+        if not _allowed(own, target)
+    ]
 
 
 def test_every_unit_of_every_side_has_a_layer():
@@ -110,19 +130,26 @@ def test_the_library_never_imports_the_dashboard():
 def test_an_agent_that_reads_the_world_or_the_task_fails_this_test(tmp_path):
     agent = tmp_path / "l3mvn" / "agent" / "modular"
     agent.mkdir(parents=True)
-    (agent / "cheat.py").write_text("def f():\n    from l3mvn.world.task import ObjectNavTask\n"
-                                    "import l3mvn.world.sim.simulator\nfrom l3mvn.core.types import Pose\n")
-    assert set(_problems(tmp_path)) == {"l3mvn/agent/modular/cheat.py: agent.modular imports world.task",
-                                        "l3mvn/agent/modular/cheat.py: agent.modular imports world.sim"}
+    (agent / "cheat.py").write_text(
+        "def f():\n    from l3mvn.world.task import ObjectNavTask\n"
+        "import l3mvn.world.sim.simulator\nfrom l3mvn.core.types import Pose\n"
+    )
+    assert set(_problems(tmp_path)) == {
+        "l3mvn/agent/modular/cheat.py: agent.modular imports world.task",
+        "l3mvn/agent/modular/cheat.py: agent.modular imports world.sim",
+    }
 
 
 def test_the_world_never_reads_the_agent_and_nothing_reads_upwards(tmp_path):
     (tmp_path / "l3mvn" / "world" / "task").mkdir(parents=True)
     (tmp_path / "l3mvn" / "world" / "task" / "x.py").write_text(
         "from l3mvn.agent.mapping import SemanticMap\nfrom l3mvn.run.eval.job import EvalJob\n"
-        "from l3mvn.world.datasets import EpisodeSet\nfrom app.server import y\nimport l3mvn.loose\n")
-    assert set(_problems(tmp_path)) == {"l3mvn/world/task/x.py: world.task imports agent.mapping",
-                                        "l3mvn/world/task/x.py: world.task imports run.eval",
-                                        "l3mvn/world/task/x.py: world.task imports world.datasets",
-                                        "l3mvn/world/task/x.py: world.task imports studio.*",
-                                        "l3mvn/world/task/x.py: world.task imports ?.l3mvn.loose"}
+        "from l3mvn.world.datasets import EpisodeSet\nfrom app.server import y\nimport l3mvn.loose\n"
+    )
+    assert set(_problems(tmp_path)) == {
+        "l3mvn/world/task/x.py: world.task imports agent.mapping",
+        "l3mvn/world/task/x.py: world.task imports run.eval",
+        "l3mvn/world/task/x.py: world.task imports world.datasets",
+        "l3mvn/world/task/x.py: world.task imports studio.*",
+        "l3mvn/world/task/x.py: world.task imports ?.l3mvn.loose",
+    }

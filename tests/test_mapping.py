@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from l3mvn.core.errors import L3MVNError
-from l3mvn.core.config import MapConfig, SimConfig
 from l3mvn.agent.mapping import SemanticMapper
 from l3mvn.core.camera import CameraIntrinsics, depth_to_points, downsample_frame
+from l3mvn.core.config import MapConfig, SimConfig
+from l3mvn.core.errors import L3MVNError
 from l3mvn.core.types import Pose
 
 H, W = 120, 160
@@ -23,7 +23,9 @@ START = Pose(3.3, -1.2, 0.0)
 
 
 def _mapper(cfg: MapConfig | None = None, start: Pose = START) -> SemanticMapper:
-    mapper = SemanticMapper(cfg or MapConfig(), INTR, CATS, max_depth_m=SIM.max_depth_m, body_radius_m=SIM.agent_radius_m)
+    mapper = SemanticMapper(
+        cfg or MapConfig(), INTR, CATS, max_depth_m=SIM.max_depth_m, body_radius_m=SIM.agent_radius_m
+    )
     mapper.reset(start)
     return mapper
 
@@ -175,8 +177,14 @@ def _sensed(depth: np.ndarray) -> np.ndarray:
 
 
 def _ranged_mapper() -> SemanticMapper:
-    mapper = SemanticMapper(MapConfig(), INTR, CATS, max_depth_m=SIM.max_depth_m,
-                            body_radius_m=SIM.agent_radius_m, min_depth_m=SIM.min_depth_m)
+    mapper = SemanticMapper(
+        MapConfig(),
+        INTR,
+        CATS,
+        max_depth_m=SIM.max_depth_m,
+        body_radius_m=SIM.agent_radius_m,
+        min_depth_m=SIM.min_depth_m,
+    )
     mapper.reset(START)
     return mapper
 
@@ -210,7 +218,7 @@ def test_a_guessed_obstacle_never_lands_on_seen_floor_and_seen_floor_takes_it_ba
     open_floor = _sensed(_ray_cast(START, 0.0, [(2, 0.0), (0, START.x + 4.0)]))
     seen_first = _ranged_mapper()
     seen_first.update(open_floor, None, START, 0.0)
-    assert not seen_first.update(near_wall, None, START, 0.0).obstacle[:, CENTRE:CENTRE + 60].any()
+    assert not seen_first.update(near_wall, None, START, 0.0).obstacle[:, CENTRE : CENTRE + 60].any()
 
     guessed_first = _ranged_mapper()
     guessed = guessed_first.update(near_wall, None, START, 0.0).obstacle.copy()
@@ -230,7 +238,7 @@ def test_an_obstacle_seen_where_one_was_guessed_stays():
     assert seen.obstacle[:, wall_col].any()
     # The floor seen in front of the wall took back the guesses lying on it; those behind it stay.
     assert not (seen.obstacle & guessed)[:, :wall_col].any()
-    assert (seen.obstacle & guessed)[:, wall_col + 1:].any()
+    assert (seen.obstacle & guessed)[:, wall_col + 1 :].any()
 
 
 def test_invalid_rays_that_may_have_seen_nothing_mark_nothing():
@@ -334,7 +342,9 @@ def test_map_sizes_follow_the_config():
 # --- bad inputs -------------------------------------------------------------------------------
 def test_update_before_reset_raises():
     with pytest.raises(L3MVNError, match="reset"):
-        SemanticMapper(MapConfig(), INTR, CATS, max_depth_m=SIM.max_depth_m, body_radius_m=SIM.agent_radius_m).update(_wall(2.0), None, START, 0.0)
+        SemanticMapper(MapConfig(), INTR, CATS, max_depth_m=SIM.max_depth_m, body_radius_m=SIM.agent_radius_m).update(
+            _wall(2.0), None, START, 0.0
+        )
 
 
 def test_depth_of_the_wrong_shape_raises():

@@ -62,10 +62,20 @@ class _Replay:
             return action
         n = 64
         everything = np.ones((n, n), bool)
-        boasted = SemanticMap(obstacle=~everything, explored=everything, visited=~everything,
-                              categories=everything[None], category_names=("toilet",), looked=everything,
-                              resolution_m=1.0, start_xy=(0.0, 0.0), agent_cell=(32, 32), agent_heading=0.0,
-                              local_cells=n, footprint_radius_cells=1)
+        boasted = SemanticMap(
+            obstacle=~everything,
+            explored=everything,
+            visited=~everything,
+            categories=everything[None],
+            category_names=("toilet",),
+            looked=everything,
+            resolution_m=1.0,
+            start_xy=(0.0, 0.0),
+            agent_cell=(32, 32),
+            agent_heading=0.0,
+            local_cells=n,
+            footprint_radius_cells=1,
+        )
         return Decision(action=action, target_seen=True, stuck=True, map=boasted)
 
 
@@ -86,7 +96,10 @@ def test_two_policies_walking_the_same_way_get_the_same_measures_whatever_they_r
     assert honest.success == 0.0 and honest.steps == 60
     for other in (boaster, mapper):
         assert (other.failure, other.extra["coverage"], other.extra["confirmed"]) == (
-            honest.failure, honest.extra["coverage"], honest.extra["confirmed"])
+            honest.failure,
+            honest.extra["coverage"],
+            honest.extra["confirmed"],
+        )
     assert honest.failure != "stuck" and 0.2 < honest.extra["coverage"] < 0.9
     # What a policy says of itself is kept, apart, as its own diagnostics.
     assert "agent" not in honest.extra
@@ -104,8 +117,17 @@ def test_the_target_is_confirmed_by_the_frames_once_enough_of_it_was_seen_up_clo
 
 def _frame(env: BuiltinSimulator, pose: Pose, tilt: float = 0.0) -> Observation:
     rendered = env.renderer.render(pose, tilt)
-    return Observation(rgb=rendered.rgb, depth=rendered.depth, semantic=rendered.semantic, pose=pose, tilt=tilt,
-                       goal="toilet", step=0, collided=False, categories=env.categories)
+    return Observation(
+        rgb=rendered.rgb,
+        depth=rendered.depth,
+        semantic=rendered.semantic,
+        pose=pose,
+        tilt=tilt,
+        goal="toilet",
+        step=0,
+        collided=False,
+        categories=env.categories,
+    )
 
 
 def test_the_floor_seen_grows_with_each_view_and_stops_at_the_walls(tiny_scene):

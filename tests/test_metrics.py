@@ -4,14 +4,24 @@ import numpy as np
 import pytest
 
 from l3mvn.core.config import Config, TaskConfig
-from l3mvn.world.task.regions import geodesic_field, goal_region
 from l3mvn.run.eval.metrics import format_summary, summarize
+from l3mvn.world.task.regions import geodesic_field, goal_region
 from l3mvn.world.task.scoring import EpisodeOutcome, score_episode
 
 
 def _outcome(**kw):
-    base = dict(stopped=True, in_success_region=True, steps=40, path_length_m=6.0, shortest_path_m=5.0,
-                final_distance_m=0.0, saw_target=True, entered_region=True, recent_collision_rate=0.0, coverage=0.3)
+    base = dict(
+        stopped=True,
+        in_success_region=True,
+        steps=40,
+        path_length_m=6.0,
+        shortest_path_m=5.0,
+        final_distance_m=0.0,
+        saw_target=True,
+        entered_region=True,
+        recent_collision_rate=0.0,
+        coverage=0.3,
+    )
     base.update(kw)
     return EpisodeOutcome(**base)
 
@@ -25,17 +35,24 @@ def test_spl_caps_at_one_when_walked_less_than_shortest():
     assert score_episode(_outcome(path_length_m=4.0), TaskConfig())[1] == 1.0
 
 
-@pytest.mark.parametrize("kw,cause", [
-    (dict(in_success_region=False, final_distance_m=2.0), "false_stop"),
-    (dict(stopped=False, in_success_region=False, saw_target=False, entered_region=False), "never_saw_target"),
-    (dict(stopped=False, in_success_region=False, saw_target=False, entered_region=False, coverage=0.5),
-     "never_saw_target"),
-    (dict(stopped=False, in_success_region=False, saw_target=False, entered_region=False, coverage=0.95),
-     "unseen_in_explored"),
-    (dict(stopped=False, in_success_region=False, entered_region=False), "saw_target_not_reached"),
-    (dict(stopped=False, in_success_region=True), "timeout"),
-    (dict(stopped=False, in_success_region=False, recent_collision_rate=0.8), "stuck"),
-])
+@pytest.mark.parametrize(
+    "kw,cause",
+    [
+        (dict(in_success_region=False, final_distance_m=2.0), "false_stop"),
+        (dict(stopped=False, in_success_region=False, saw_target=False, entered_region=False), "never_saw_target"),
+        (
+            dict(stopped=False, in_success_region=False, saw_target=False, entered_region=False, coverage=0.5),
+            "never_saw_target",
+        ),
+        (
+            dict(stopped=False, in_success_region=False, saw_target=False, entered_region=False, coverage=0.95),
+            "unseen_in_explored",
+        ),
+        (dict(stopped=False, in_success_region=False, entered_region=False), "saw_target_not_reached"),
+        (dict(stopped=False, in_success_region=True), "timeout"),
+        (dict(stopped=False, in_success_region=False, recent_collision_rate=0.8), "stuck"),
+    ],
+)
 def test_each_failure_cause_is_distinguished(kw, cause):
     s, spl, _, c = score_episode(_outcome(**kw), TaskConfig())
     assert (s, spl, c) == (0.0, 0.0, cause)
@@ -55,8 +72,10 @@ def test_summary_reports_per_category_and_names_the_rule():
 
 
 def test_summary_refuses_to_mix_rules():
-    rows = [dict(key="a", goal="bed", policy="p", success=1.0, spl=1.0, dtg=0.0, failure="success", rule=r)
-            for r in ("semexp", "geodesic")]
+    rows = [
+        dict(key="a", goal="bed", policy="p", success=1.0, spl=1.0, dtg=0.0, failure="success", rule=r)
+        for r in ("semexp", "geodesic")
+    ]
     with pytest.raises(ValueError, match="mix success rules"):
         summarize(rows)
 
@@ -79,7 +98,7 @@ def test_semexp_region_is_a_one_metre_disk_around_the_goal_and_adds_one_metre(ti
     rows, cols = np.nonzero(g.region)
     tr, tc = np.nonzero(toilet)
     d2 = ((rows[:, None] - tr[None]) ** 2 + (cols[:, None] - tc[None]) ** 2).min(1)
-    assert d2.max() <= 20 ** 2
+    assert d2.max() <= 20**2
     x, y = tiny_scene.cell_center(80, 30)
     assert math.isclose(g.shortest_path_length(x, y), g.distance_at(x, y) + 1.0)
 

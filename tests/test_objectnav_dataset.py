@@ -14,20 +14,40 @@ import pytest
 pytest.importorskip("trimesh")
 pytest.importorskip("embreex")
 
+from l3mvn.core.categories import GOAL_CATEGORIES
+from l3mvn.core.config import SUCCESS_RULES  # noqa: E402
+from l3mvn.core.errors import L3MVNError  # noqa: E402
 from l3mvn.run.cli import main  # noqa: E402
 from l3mvn.world.datasets import load_episode_set  # noqa: E402
 from l3mvn.world.datasets.hm3d_export import export_hm3d  # noqa: E402
-from l3mvn.world.datasets.objectnav_files import HM3D_GOAL_NAMES  # noqa: E402
 from l3mvn.world.datasets.objectnav import FORMAT_RULES, dataset_rule, detect_format  # noqa: E402
-from l3mvn.core.config import SUCCESS_RULES  # noqa: E402
-from l3mvn.core.errors import L3MVNError  # noqa: E402
+from l3mvn.world.datasets.objectnav_files import HM3D_GOAL_NAMES  # noqa: E402
 from l3mvn.world.scenes.categories import GOAL_NAMES, SCAN_CATEGORIES, goal_category, raw_category  # noqa: E402
-from l3mvn.core.categories import GOAL_CATEGORIES
 
 SCENE = "procedural-0000"
-MP3D_GOALS = ("chair", "table", "picture", "cabinet", "cushion", "sofa", "bed", "chest_of_drawers", "plant", "sink",
-              "toilet", "stool", "towel", "tv_monitor", "shower", "bathtub", "counter", "fireplace", "gym_equipment",
-              "seating", "clothes")
+MP3D_GOALS = (
+    "chair",
+    "table",
+    "picture",
+    "cabinet",
+    "cushion",
+    "sofa",
+    "bed",
+    "chest_of_drawers",
+    "plant",
+    "sink",
+    "toilet",
+    "stool",
+    "towel",
+    "tv_monitor",
+    "shower",
+    "bathtub",
+    "counter",
+    "fireplace",
+    "gym_equipment",
+    "seating",
+    "clothes",
+)
 
 
 @pytest.fixture(scope="module")
@@ -59,6 +79,7 @@ def _refused(match: str, dataset: Path, scenes: Path | None):
 
 
 # --- tables -------------------------------------------------------------------------------------
+
 
 def test_goal_tables_cover_every_format():
     for name in HM3D_GOAL_NAMES.values():  # HM3D's six are our six
@@ -97,6 +118,7 @@ def test_default_rule_follows_the_dataset(exported, tiny_dataset):
 
 # --- reading ------------------------------------------------------------------------------------
 
+
 def test_reads_habitat_episodes(exported):
     eset = load_episode_set(exported / "objectnav_hm3d_v2", "val", scenes_dir=exported / "scene_datasets")
     content = _content(exported)
@@ -114,8 +136,11 @@ def test_reads_habitat_episodes(exported):
 
 def test_scans_are_found_by_the_tail_of_the_scene_id(exported):
     """``--scenes`` may be the scene_datasets root, the hm3d_v0.2 folder or the split folder."""
-    for scenes in (exported / "scene_datasets", exported / "scene_datasets" / "hm3d_v0.2",
-                   exported / "scene_datasets" / "hm3d_v0.2" / "val"):
+    for scenes in (
+        exported / "scene_datasets",
+        exported / "scene_datasets" / "hm3d_v0.2",
+        exported / "scene_datasets" / "hm3d_v0.2" / "val",
+    ):
         eset = load_episode_set(exported / "objectnav_hm3d_v2", "val", scenes_dir=scenes)
         assert list(eset.scenes) == [SCENE]
 
@@ -135,7 +160,8 @@ def test_mp3d_layout_with_a_z_up_stage(exported, tmp_path):
         (dst / f"{SCENE}{suffix}").write_bytes(scene.export(file_type="glb"))
     shutil.copy(src / f"{SCENE}.semantic.txt", dst)
     (tmp_path / "scans" / "mp3d" / "mp3d.scene_dataset_config.json").write_text(
-        json.dumps({"stages": {"default_attributes": {"up": [0, 0, 1], "front": [0, 1, 0]}}}))
+        json.dumps({"stages": {"default_attributes": {"up": [0, 0, 1], "front": [0, 1, 0]}}})
+    )
     content = _content(exported)
     for rec in content["episodes"]:
         rec["scene_id"] = f"mp3d/{SCENE}/{SCENE}.glb"
@@ -162,6 +188,7 @@ def test_a_scan_without_semantic_annotation_says_its_goals_cannot_be_seen(export
 
 # --- one line for every bad input ---------------------------------------------------------------
 
+
 def test_corrupt_split_file(exported, tmp_path):
     dataset = _dataset(tmp_path, exported, _content(exported))
     (dataset / "val" / "val.json.gz").write_bytes(b"not gzip at all")
@@ -175,37 +202,53 @@ def test_rotation_in_the_wrong_order(exported, tmp_path):
     if abs(w) < 0.02:  # a yaw of 180 degrees reads the same in both orders: make it a 90 degree one
         content["episodes"][0]["start_rotation"] = [0.7071, 0.0, 0.7071, 0.0]
     dataset = _dataset(tmp_path, exported, content)
-    _refused(r"episode #0 \(id 0\): start_rotation .* must be a rotation about the up axis \(0, y, 0, w in habitat's "
-             r"\(x, y, z, w\) order\)", dataset, exported / "scene_datasets")
+    _refused(
+        r"episode #0 \(id 0\): start_rotation .* must be a rotation about the up axis \(0, y, 0, w in habitat's "
+        r"\(x, y, z, w\) order\)",
+        dataset,
+        exported / "scene_datasets",
+    )
 
 
 def test_unknown_category(exported, tmp_path):
     content = _content(exported)
     content["episodes"][1]["object_category"] = "lamp"
-    _refused(r"episode #1 \(id 1\): unknown object_category 'lamp'; valid: bathtub, bed",
-             _dataset(tmp_path, exported, content), exported / "scene_datasets")
+    _refused(
+        r"episode #1 \(id 1\): unknown object_category 'lamp'; valid: bathtub, bed",
+        _dataset(tmp_path, exported, content),
+        exported / "scene_datasets",
+    )
 
 
 def test_duplicate_episode_ids(exported, tmp_path):
     content = _content(exported)
     content["episodes"][2]["episode_id"] = content["episodes"][0]["episode_id"]
-    _refused("episode #2: episode_id 0 repeats .*#0 of scene procedural-0000",
-             _dataset(tmp_path, exported, content), exported / "scene_datasets")
+    _refused(
+        "episode #2: episode_id 0 repeats .*#0 of scene procedural-0000",
+        _dataset(tmp_path, exported, content),
+        exported / "scene_datasets",
+    )
 
 
 def test_bad_view_points(exported, tmp_path):
     content = _content(exported)
     key = next(iter(content["goals_by_category"]))
     content["goals_by_category"][key][0]["view_points"] = [{"agent_state": {"position": [0.0, "x", 0.0]}}]
-    _refused(r"view_points\[0\]: agent_state.position must be a list of 3 numbers",
-             _dataset(tmp_path, exported, content), exported / "scene_datasets")
+    _refused(
+        r"view_points\[0\]: agent_state.position must be a list of 3 numbers",
+        _dataset(tmp_path, exported, content),
+        exported / "scene_datasets",
+    )
 
 
 def test_start_outside_the_scan(exported, tmp_path):
     content = _content(exported)
     content["episodes"][0]["start_position"][0] += 100.0
-    _refused("start lies outside the scan's floor procedural-0000/0", _dataset(tmp_path, exported, content),
-             exported / "scene_datasets")
+    _refused(
+        "start lies outside the scan's floor procedural-0000/0",
+        _dataset(tmp_path, exported, content),
+        exported / "scene_datasets",
+    )
 
 
 def test_missing_scans(exported, tmp_path):
@@ -239,9 +282,14 @@ def test_a_scene_id_never_leaves_the_scan_root(exported, tmp_path):
     outside = tmp_path / "outside"
     shutil.copytree(exported / "scene_datasets", outside)
     stage = next(outside.rglob("procedural-0000.glb"))
-    for scene_id, match in ((f"../../outside/{stage.relative_to(outside)}", r"scene_id '\.\./\.\./outside/.*' would "
-                             r"leave --scenes .*root/scene_datasets: it must name a file inside it"),
-                            (str(stage), r"scan /.*procedural-0000.glb is not under --scenes .*root/scene_datasets")):
+    for scene_id, match in (
+        (
+            f"../../outside/{stage.relative_to(outside)}",
+            r"scene_id '\.\./\.\./outside/.*' would "
+            r"leave --scenes .*root/scene_datasets: it must name a file inside it",
+        ),
+        (str(stage), r"scan /.*procedural-0000.glb is not under --scenes .*root/scene_datasets"),
+    ):
         content = _content(exported)
         for episode in content["episodes"]:
             episode["scene_id"] = scene_id

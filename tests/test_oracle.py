@@ -3,12 +3,12 @@
 import json
 import math
 
-from l3mvn.run.cli import main
 from l3mvn.core.config import Config, SimConfig
-from l3mvn.world.baselines import OraclePolicy
-from l3mvn.world.sim.simulator import BuiltinSimulator
 from l3mvn.core.types import Action, Pose
+from l3mvn.run.cli import main
+from l3mvn.world.baselines import OraclePolicy
 from l3mvn.world.episode import Episode
+from l3mvn.world.sim.simulator import BuiltinSimulator
 from l3mvn.world.task import ObjectNavTask
 
 
@@ -35,8 +35,25 @@ def test_when_no_forward_move_helps_the_oracle_turns_towards_the_path(tiny_scene
 
 def test_infeasible_episodes_are_failures_counted_apart_and_the_run_finishes(shut_dataset, tmp_path, capsys):
     out = tmp_path / "results.jsonl"
-    assert main(["eval", "--dataset", str(shut_dataset), "--split", "val", "--policy", "oracle",
-                 "--frame", "60x80", "--out", str(out), "--json"]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                "--dataset",
+                str(shut_dataset),
+                "--split",
+                "val",
+                "--policy",
+                "oracle",
+                "--frame",
+                "60x80",
+                "--out",
+                str(out),
+                "--json",
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     summary = json.loads(printed.strip().splitlines()[-1])
     rows = {r["episode_id"]: r for r in map(json.loads, out.read_text().splitlines())}
@@ -64,7 +81,23 @@ def test_the_oracle_succeeds_where_each_goal_has_a_single_view_point(tmp_path, c
                 goal["view_points"] = [goal["view_points"][len(goal["view_points"]) // 2]]
         content.write_bytes(gzip.compress(json.dumps(data).encode()))
     out = tmp_path / "oracle.jsonl"
-    assert main(["eval", "--dataset", str(tmp_path / "objectnav_hm3d_v2"), "--scenes", str(tmp_path / "scene_datasets"),
-                 "--split", "val", "--policy", "oracle", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                "--dataset",
+                str(tmp_path / "objectnav_hm3d_v2"),
+                "--scenes",
+                str(tmp_path / "scene_datasets"),
+                "--split",
+                "val",
+                "--policy",
+                "oracle",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     rows = [json.loads(line) for line in out.read_text().splitlines()]
     assert len(rows) == 24 and [r["key"] for r in rows if r["success"] != 1] == []

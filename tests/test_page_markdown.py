@@ -28,10 +28,20 @@ def test_the_agents_collision_marks_show_on_its_map_in_their_own_legend_colour()
     n = 80
     explored = np.zeros((n, n), bool)
     explored[20:60, 20:60] = True
-    sem_map = SemanticMap(obstacle=np.zeros((n, n), bool), explored=explored, visited=np.zeros((n, n), bool),
-                          categories=np.zeros((1, n, n), bool), category_names=("toilet",), looked=explored,
-                          resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=(40, 40), agent_heading=0.0,
-                          local_cells=n, footprint_radius_cells=3)
+    sem_map = SemanticMap(
+        obstacle=np.zeros((n, n), bool),
+        explored=explored,
+        visited=np.zeros((n, n), bool),
+        categories=np.zeros((1, n, n), bool),
+        category_names=("toilet",),
+        looked=explored,
+        resolution_m=0.05,
+        start_xy=(0.0, 0.0),
+        agent_cell=(40, 40),
+        agent_heading=0.0,
+        local_cells=n,
+        footprint_radius_cells=3,
+    )
     marks = np.array([[40, 43], [41, 43], [39, 43]], np.int32)
     view = agent_map_view(Decision(action=Action.MOVE_FORWARD, map=sem_map, collision_marks=marks))
     r0, c0 = view.origin
@@ -61,10 +71,21 @@ def test_guessed_obstacles_show_apart_from_seen_ones_in_their_own_legend_colour(
     obstacle, inferred = np.zeros((n, n), bool), np.zeros((n, n), bool)
     obstacle[30, 30:50] = True
     inferred[50, 30:50] = obstacle[50, 30:50] = True
-    sem_map = SemanticMap(obstacle=obstacle, explored=explored, visited=np.zeros((n, n), bool),
-                          categories=np.zeros((1, n, n), bool), category_names=("toilet",), looked=explored,
-                          resolution_m=0.05, start_xy=(0.0, 0.0), agent_cell=(40, 40), agent_heading=0.0,
-                          local_cells=n, footprint_radius_cells=3, inferred=inferred)
+    sem_map = SemanticMap(
+        obstacle=obstacle,
+        explored=explored,
+        visited=np.zeros((n, n), bool),
+        categories=np.zeros((1, n, n), bool),
+        category_names=("toilet",),
+        looked=explored,
+        resolution_m=0.05,
+        start_xy=(0.0, 0.0),
+        agent_cell=(40, 40),
+        agent_heading=0.0,
+        local_cells=n,
+        footprint_radius_cells=3,
+        inferred=inferred,
+    )
     view = agent_map_view(Decision(action=Action.MOVE_FORWARD, map=sem_map))
     r0, c0 = view.origin
 

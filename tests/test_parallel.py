@@ -13,12 +13,12 @@ import time
 from pathlib import Path
 
 import pytest
-
 from conftest import draw_two_room_house
+
 from l3mvn.core.config import Config
-from l3mvn.world.episodes import episode_file, generate_episodes, write_episode_file
 from l3mvn.run.eval.backends import run_local
 from l3mvn.run.eval.job import EvalJob, is_error_row
+from l3mvn.world.episodes import episode_file, generate_episodes, write_episode_file
 from l3mvn.world.scenes.semexp import save_split
 
 REPO = Path(__file__).resolve().parents[1]
@@ -90,8 +90,23 @@ def test_a_worker_killed_mid_run_costs_a_retry_not_an_episode(tiny_dataset):
 
 
 def eval_cmd(dataset: Path, out: Path, *extra: str) -> list[str]:
-    return [sys.executable, "-m", "l3mvn.run.cli", "eval", "--dataset", str(dataset), "--policy", "oracle",
-            "--frame", "240x320", "--workers", "2", "--out", str(out), *extra]
+    return [
+        sys.executable,
+        "-m",
+        "l3mvn.run.cli",
+        "eval",
+        "--dataset",
+        str(dataset),
+        "--policy",
+        "oracle",
+        "--frame",
+        "240x320",
+        "--workers",
+        "2",
+        "--out",
+        str(out),
+        *extra,
+    ]
 
 
 def complete_rows(out: Path) -> list[dict]:
@@ -103,8 +118,9 @@ def complete_rows(out: Path) -> list[dict]:
 def interrupt_after_new_line(cmd: list[str], out: Path, sig: int) -> subprocess.CompletedProcess:
     """Start the CLI, send ``sig`` once it has written a line, and check that it stopped mid-run."""
     before = len(complete_rows(out)) if out.exists() else 0
-    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=default_sigint)
+    proc = subprocess.Popen(
+        cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint
+    )
     deadline = time.monotonic() + 30
     while (not out.exists() or len(complete_rows(out)) == before) and time.monotonic() < deadline:
         assert proc.poll() is None, proc.communicate()
@@ -142,8 +158,7 @@ def test_an_interrupted_parallel_cli_run_resumes_to_exactly_one_line_per_episode
         rows = complete_rows(out)
         assert len({r["key"] for r in rows}) < 30, "the run finished before it was interrupted"
         assert_gone({int(r["worker"].rsplit(":", 1)[1]) for r in rows})
-    done = subprocess.run(eval_cmd(dataset, out, "--resume"), cwd=REPO, capture_output=True, text=True,
-                          timeout=120)
+    done = subprocess.run(eval_cmd(dataset, out, "--resume"), cwd=REPO, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     keys = [r["key"] for r in complete_rows(out) if not is_error_row(r)]
     assert len(keys) == len(set(keys)) == 30

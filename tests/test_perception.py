@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.perception import SegmentationNoise
+from l3mvn.core.errors import L3MVNError
 
 FRAME = np.zeros((20, 30), np.int32)
 FRAME[2:8, 2:8] = 3

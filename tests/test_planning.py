@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from l3mvn.core.errors import L3MVNError
-from l3mvn.core.config import PlannerConfig, SimConfig
 from l3mvn.agent.planning import GeodesicField, LocalPlanner, Window, distance_field
 from l3mvn.agent.planning.steering import Steering
+from l3mvn.core.config import PlannerConfig, SimConfig
+from l3mvn.core.errors import L3MVNError
 from l3mvn.core.types import Action
 
 RES = 0.05
@@ -317,7 +317,7 @@ def test_a_step_into_a_mapped_corner_marks_beside_it_when_a_mark_across_would_sh
     assert grown[marks[:, 0], marks[:, 1]].all() and not obstacle[marks[:, 0], marks[:, 1]].any()
     assert plan.reachable and plan.distance_to_goal_m == pytest.approx(open_way, abs=0.3)
     again = planner.plan(obstacle, agent, into_corner, goal, last_move_m=0.0)  # the map was wrong
-    added = planner.collision_cells[len(marks):]
+    added = planner.collision_cells[len(marks) :]
     assert again.collided and not again.marked_beside and len(added) >= 9 and (added[:, 1] < agent[1]).all()
 
 
@@ -337,15 +337,22 @@ def test_marks_beside_that_leave_the_failed_step_the_way_on_are_not_laid():
     for last_move, heading in ((0.0, math.pi), (None, math.pi / 2), (0.25, math.pi / 2), (0.0, math.pi / 2)):
         a, b = (p.plan(obstacle, (58, 84), heading, (58, 20), last_move_m=last_move) for p in (tried, never))
         assert (a.action, a.short_term_goal, a.distance_to_goal_m, a.replanned) == (
-            b.action, b.short_term_goal, b.distance_to_goal_m, b.replanned)
+            b.action,
+            b.short_term_goal,
+            b.distance_to_goal_m,
+            b.replanned,
+        )
         assert np.array_equal(tried.collision_map, never.collision_map)
 
 
-@pytest.mark.parametrize("walls, start", [
-    (_room(), (58, 84)),  # nothing mapped in the way
-    (_passage(57, 62), (59, 60)),  # along the passage: no nearer its walls a step on
-    (_passage(55, 64), (58, 84)),  # a wide passage the rectangle leaves open
-])
+@pytest.mark.parametrize(
+    "walls, start",
+    [
+        (_room(), (58, 84)),  # nothing mapped in the way
+        (_passage(57, 62), (59, 60)),  # along the passage: no nearer its walls a step on
+        (_passage(55, 64), (58, 84)),  # a wide passage the rectangle leaves open
+    ],
+)
 def test_a_step_the_map_cannot_explain_or_whose_mark_leaves_the_way_open_blocks_the_way_ahead(walls, start):
     planner = LocalPlanner.for_sim(PlannerConfig(), RES, SIM)
     plan = planner.plan(walls, start, math.pi, (60, 20), last_move_m=0.0)
@@ -412,9 +419,7 @@ def test_forward_step_that_moved_enough_is_not_a_collision():
 def test_repeated_collisions_raise_stuck():
     cfg = PlannerConfig(stuck_collisions=5, stuck_window_steps=50)
     planner = LocalPlanner.for_sim(cfg, RES, SIM)
-    flags = [
-        planner.plan(_room(), (60, 30), 0.0, (60, 100), last_move_m=0.0).stuck for _ in range(5)
-    ]
+    flags = [planner.plan(_room(), (60, 30), 0.0, (60, 100), last_move_m=0.0).stuck for _ in range(5)]
     assert flags == [False, False, False, False, True]
 
 
@@ -489,8 +494,13 @@ def test_bad_inputs_raise_clear_errors():
             PlannerConfig(keep_heading_deg=keep)
 
 
-def _drive(obstacle: np.ndarray, start: tuple[float, float, float], goal: tuple[int, int], steps: int,
-           planner: LocalPlanner | None = None) -> tuple[int, LocalPlanner, list[Action]]:
+def _drive(
+    obstacle: np.ndarray,
+    start: tuple[float, float, float],
+    goal: tuple[int, int],
+    steps: int,
+    planner: LocalPlanner | None = None,
+) -> tuple[int, LocalPlanner, list[Action]]:
     """A 2D kinematic agent (0.25 m steps, 30 deg turns, 0.18 m disk) driven by the planner: the
     steps it took to reach ``goal``, the planner, and its actions."""
     clearance = ndimage.distance_transform_edt(~obstacle) * RES

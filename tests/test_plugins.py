@@ -77,22 +77,52 @@ def plugin_path(tmp_path_factory) -> Path:
     source.mkdir()
     for name, text in PACKAGE.items():
         (source / name).write_text(textwrap.dedent(text).lstrip())
-    subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
-                    "--no-index", "--disable-pip-version-check", "--target", str(target), str(source)],
-                   check=True, capture_output=True, text=True, timeout=300)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--no-deps",
+            "--no-build-isolation",
+            "--no-index",
+            "--disable-pip-version-check",
+            "--target",
+            str(target),
+            str(source),
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     return target
 
 
 def _l3mvn(plugin_path: Path, *args: str, **kw) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(plugin_path), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", *args], capture_output=True, text=True,
-                          env=env, timeout=600, **kw)
+    return subprocess.run(
+        [sys.executable, "-m", "l3mvn_studio.cli", *args], capture_output=True, text=True, env=env, timeout=600, **kw
+    )
 
 
 def test_a_policy_from_an_installed_package_runs_in_eval(plugin_path, tmp_path):
     out = tmp_path / "results.jsonl"
-    run = _l3mvn(plugin_path, "eval", "--policy", "bump-and-turn", "--houses", "1", "--episodes", "2",
-                 "--frame", "120x160", "--out", str(out))
+    run = _l3mvn(
+        plugin_path,
+        "eval",
+        "--policy",
+        "bump-and-turn",
+        "--houses",
+        "1",
+        "--episodes",
+        "2",
+        "--frame",
+        "120x160",
+        "--out",
+        str(out),
+    )
     assert run.returncode == 0, run.stderr
     rows = [json.loads(line) for line in out.read_text().splitlines()]
     assert len(rows) == 2 and {r["policy"] for r in rows} == {"bump-and-turn"}
@@ -113,8 +143,22 @@ def test_a_broken_plugin_asked_for_by_name_is_refused_in_one_line_saying_why(plu
 
 def test_a_scorer_from_an_installed_package_scores_for_a_language_policy(plugin_path, tmp_path):
     out = tmp_path / "results.jsonl"
-    run = _l3mvn(plugin_path, "eval", "--policy", "l3mvn-zs", "--scorer", "sink-means-toilet", "--houses", "1",
-                 "--episodes", "1", "--frame", "120x160", "--out", str(out))
+    run = _l3mvn(
+        plugin_path,
+        "eval",
+        "--policy",
+        "l3mvn-zs",
+        "--scorer",
+        "sink-means-toilet",
+        "--houses",
+        "1",
+        "--episodes",
+        "1",
+        "--frame",
+        "120x160",
+        "--out",
+        str(out),
+    )
     assert run.returncode == 0, run.stderr
     row = json.loads(out.read_text().splitlines()[0])
     assert row["config"]["policy"]["scorer"] == "sink-means-toilet"

@@ -4,30 +4,40 @@ from __future__ import annotations
 
 import importlib.util
 import math
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
+from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
 from l3mvn.core.config import SimConfig
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.grid import disk
 from l3mvn.world.scenes.procedural import (
-    MAX_ROOMS, MIN_ROOMS, PROCEDURAL_CATEGORIES, ProceduralHouse, build_house, generate_house,
-    generate_houses, procedural_split,
+    MAX_ROOMS,
+    MIN_ROOMS,
+    PROCEDURAL_CATEGORIES,
+    ProceduralHouse,
+    build_house,
+    generate_house,
+    generate_houses,
+    procedural_split,
 )
 from l3mvn.world.scenes.room_contents import (
-    ROOM_CONTENTS_PATH, build_room_contents, category_of, dump_room_contents, load_room_contents,
+    ROOM_CONTENTS_PATH,
+    build_room_contents,
+    category_of,
+    dump_room_contents,
+    load_room_contents,
     room_categories,
 )
-from l3mvn.core.grid import disk
-from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
 
 SEEDS = range(30)
 RADIUS_CELLS = 4  # SimConfig.agent_radius_m = 0.18 m on 5 cm cells
 
 
-@lru_cache(maxsize=None)
+@cache
 def house(seed: int) -> ProceduralHouse:
     return build_house(seed)
 
@@ -93,8 +103,19 @@ def test_every_goal_object_has_a_navigable_cell_within_one_metre():
 def test_small_items_stand_on_furniture_and_large_furniture_never_overlaps():
     index = {c: k for k, c in enumerate(PROCEDURAL_CATEGORIES)}
     small = [index[c] for c in ("book", "cup", "bottle", "vase", "clock", "laptop")]
-    surfaces = [index[c] for c in ("counter", "dining-table", "coffee table", "side table", "desk", "dresser",
-                                   "tv stand", "shelving unit")]
+    surfaces = [
+        index[c]
+        for c in (
+            "counter",
+            "dining-table",
+            "coffee table",
+            "side table",
+            "desk",
+            "dresser",
+            "tv stand",
+            "shelving unit",
+        )
+    ]
     large = [index[c] for c in ("bed", "couch", "toilet", "dining-table", "desk", "refrigerator", "counter")]
     for seed in SEEDS:
         scene = house(seed).scene
@@ -138,9 +159,18 @@ def test_categories_keep_the_goals_and_gibson_spelling_in_semexp_channel_order()
 
 def test_ai2thor_types_map_to_our_categories_explicitly():
     expected = {
-        "Sofa": "couch", "Television": "tv", "HousePlant": "potted plant", "Toilet": "toilet", "Bed": "bed",
-        "ArmChair": "chair", "DiningTable": "dining-table", "Fridge": "refrigerator", "SinkBasin": "sink",
-        "ShowerDoor": "shower", "AlarmClock": "clock", "Mug": "cup",
+        "Sofa": "couch",
+        "Television": "tv",
+        "HousePlant": "potted plant",
+        "Toilet": "toilet",
+        "Bed": "bed",
+        "ArmChair": "chair",
+        "DiningTable": "dining-table",
+        "Fridge": "refrigerator",
+        "SinkBasin": "sink",
+        "ShowerDoor": "shower",
+        "AlarmClock": "clock",
+        "Mug": "cup",
     }
     assert {t: category_of(t) for t in expected} == expected
     with pytest.raises(L3MVNError, match="has no category"):

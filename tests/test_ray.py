@@ -12,13 +12,13 @@ import time
 from types import SimpleNamespace
 
 import pytest
+from test_parallel import REPO, complete_rows, eval_cmd, metrics_by_key, write_dataset
 
 from l3mvn.core.config import Config
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.eval.backends import run_local
 from l3mvn.run.eval.job import EvalJob, is_error_row
 from l3mvn.run.eval.ray_backend import _connect, run_ray
-from test_parallel import REPO, complete_rows, eval_cmd, metrics_by_key, write_dataset
 
 ray = pytest.importorskip("ray")
 psutil = pytest.importorskip("psutil")  # after ray, which puts its bundled copy on sys.path
@@ -52,7 +52,7 @@ def test_every_port_of_a_private_ray_is_on_loopback_and_closed_after_the_run(tmp
     me, switch = psutil.Process(), os.environ.get(SWITCH)
     during: list[tuple[str, str]] = []
     ray_procs: list = []
-    for row in run_ray(job, job.keys(), address=None, num_workers=2):
+    for _ in run_ray(job, job.keys(), address=None, num_workers=2):
         if not during:  # an actor is up: the driver, the cluster and a worker are all listening
             ray_procs = me.children(recursive=True)
             during = listening([me, *ray_procs])
@@ -69,8 +69,13 @@ def test_every_port_of_a_private_ray_is_on_loopback_and_closed_after_the_run(tmp
 def test_a_driver_killed_with_sigkill_takes_its_private_ray_with_it(tmp_path):
     dataset = write_dataset(tmp_path / "data", per_house=15)
     out = tmp_path / "results.jsonl"
-    driver = subprocess.Popen(eval_cmd(dataset, out, "--backend", "ray"), cwd=REPO,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    driver = subprocess.Popen(
+        eval_cmd(dataset, out, "--backend", "ray"),
+        cwd=REPO,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         deadline = time.monotonic() + 120
         while not (out.exists() and complete_rows(out)):
@@ -97,9 +102,13 @@ def test_a_private_ray_that_is_not_on_loopback_is_shut_down_and_refused(monkeypa
     def init(**kwargs):
         calls.append(("init", kwargs["address"], os.environ.get(SWITCH), ray_constants.ENABLE_RAY_CLUSTER))
 
-    fake = SimpleNamespace(__version__="test", is_initialized=lambda: False, init=init,
-                           shutdown=lambda: calls.append(("shutdown",)),
-                           util=SimpleNamespace(get_node_ip_address=lambda: "192.0.2.7"))
+    fake = SimpleNamespace(
+        __version__="test",
+        is_initialized=lambda: False,
+        init=init,
+        shutdown=lambda: calls.append(("shutdown",)),
+        util=SimpleNamespace(get_node_ip_address=lambda: "192.0.2.7"),
+    )
     enabled = ray_constants.ENABLE_RAY_CLUSTER
     with pytest.raises(L3MVNError, match="not on loopback"):
         _connect(fake, None, 1)

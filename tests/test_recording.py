@@ -13,29 +13,85 @@ import pytest
 from rerun.chunk import RrdReader
 
 from l3mvn.core.config import AgentConfig, Config, SimConfig
-from l3mvn.world.episodes import generate_episodes
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.types import Action
 from l3mvn.run.events import EventBus
 from l3mvn.run.recording import (
-    Recorder, add_replay_arguments, list_recordings, open_recording, parse_recording_name, read_recording,
-    recording_path, run_replay,
+    Recorder,
+    add_replay_arguments,
+    list_recordings,
+    open_recording,
+    parse_recording_name,
+    read_recording,
+    recording_path,
+    run_replay,
 )
 from l3mvn.run.recording.catalogue import unique_tag
 from l3mvn.run.recording.entities import (
-    CAMERA, CAMERA_DEPTH, CAMERA_RGB, CAMERA_SEMANTIC, EPISODE, LOG_DECISIONS, LOG_EPISODE, MAP, MAP_AGENT,
-    MAP_COLLISION_MARKS, MAP_FRONTIER_CELLS, MAP_FRONTIERS, MAP_GOAL, MAP_SEMANTIC, MAP_TARGET, MAP_TRAJECTORY,
-    METRICS_CHOSEN_FRONTIER, METRICS_FRONTIER_SCORES, METRICS_FRONTIERS, METRICS_GROUND_TRUTH, METRICS_TIMINGS_MS,
-    POINTS_LABELS, POINTS_POSITIONS, TEXT_LOG, WORLD_AGENT, WORLD_GOAL, WORLD_TRAJECTORY, reader_path,
+    CAMERA,
+    CAMERA_DEPTH,
+    CAMERA_RGB,
+    CAMERA_SEMANTIC,
+    EPISODE,
+    LOG_DECISIONS,
+    LOG_EPISODE,
+    MAP,
+    MAP_AGENT,
+    MAP_COLLISION_MARKS,
+    MAP_FRONTIER_CELLS,
+    MAP_FRONTIERS,
+    MAP_GOAL,
+    MAP_SEMANTIC,
+    MAP_TARGET,
+    MAP_TRAJECTORY,
+    METRICS_CHOSEN_FRONTIER,
+    METRICS_FRONTIER_SCORES,
+    METRICS_FRONTIERS,
+    METRICS_GROUND_TRUTH,
+    METRICS_TIMINGS_MS,
+    POINTS_LABELS,
+    POINTS_POSITIONS,
+    TEXT_LOG,
+    WORLD_AGENT,
+    WORLD_GOAL,
+    WORLD_TRAJECTORY,
+    reader_path,
 )
 from l3mvn.run.recording.layout import LABELLED_FRONTIERS
 from l3mvn.run.runner import Runner
-from l3mvn.core.types import Action
+from l3mvn.world.episodes import generate_episodes
 
 MAX_STEPS = 15
-ALWAYS = {reader_path(e) for e in (CAMERA, CAMERA_RGB, CAMERA_DEPTH, CAMERA_SEMANTIC, WORLD_AGENT, WORLD_TRAJECTORY,
-                                    METRICS_GROUND_TRUTH, METRICS_TIMINGS_MS, LOG_DECISIONS, LOG_EPISODE, EPISODE)}
-MAPPED = {reader_path(e) for e in (MAP, MAP_SEMANTIC, MAP_TRAJECTORY, MAP_AGENT, MAP_GOAL, MAP_FRONTIERS,
-                                   MAP_FRONTIER_CELLS, METRICS_FRONTIERS, WORLD_GOAL)}
+ALWAYS = {
+    reader_path(e)
+    for e in (
+        CAMERA,
+        CAMERA_RGB,
+        CAMERA_DEPTH,
+        CAMERA_SEMANTIC,
+        WORLD_AGENT,
+        WORLD_TRAJECTORY,
+        METRICS_GROUND_TRUTH,
+        METRICS_TIMINGS_MS,
+        LOG_DECISIONS,
+        LOG_EPISODE,
+        EPISODE,
+    )
+}
+MAPPED = {
+    reader_path(e)
+    for e in (
+        MAP,
+        MAP_SEMANTIC,
+        MAP_TRAJECTORY,
+        MAP_AGENT,
+        MAP_GOAL,
+        MAP_FRONTIERS,
+        MAP_FRONTIER_CELLS,
+        METRICS_FRONTIERS,
+        WORLD_GOAL,
+    )
+}
 
 
 pytestmark = pytest.mark.usefixtures("strict_rerun")  # a bad log call fails the test (conftest)
@@ -140,8 +196,11 @@ def _rows(path, entity, column):
 def test_only_the_best_three_frontiers_and_the_chosen_one_are_labelled_and_scores_are_series(tiny_scene, tmp_path):
     runner = Runner(CONFIG.replace(agent=AgentConfig(look_around_steps=2)))
     recorder, _, _ = _record(runner, tiny_scene, "cost-utility", tmp_path)
-    rows = zip(_rows(recorder.path, MAP_FRONTIERS, POINTS_LABELS),
-               _rows(recorder.path, MAP_FRONTIERS, "score_cu"), _rows(recorder.path, MAP_FRONTIERS, "chosen"))
+    rows = zip(
+        _rows(recorder.path, MAP_FRONTIERS, POINTS_LABELS),
+        _rows(recorder.path, MAP_FRONTIERS, "score_cu"),
+        _rows(recorder.path, MAP_FRONTIERS, "chosen"),
+    )
     for labels, scores, chosen in rows:
         best = set(np.argsort(-np.array(scores), kind="stable")[:LABELLED_FRONTIERS].tolist())
         assert {i for i, label in enumerate(labels) if label} == best | {i for i, c in enumerate(chosen) if c}
@@ -151,21 +210,26 @@ def test_only_the_best_three_frontiers_and_the_chosen_one_are_labelled_and_score
     assert names[:2] == ["F0", "F1"] and series
     skipped = frontiers[: len(frontiers) - len(series)]  # before the first frontier there is no line to log
     assert all(count == 0 for (count,) in skipped)
-    for row, (count,) in zip(series, frontiers[len(skipped):]):  # a value per frontier of the step, gaps for others
+    for row, (count,) in zip(series, frontiers[len(skipped) :]):  # a value per frontier of the step, gaps for others
         assert sum(np.isfinite(v) for v in row) == count
     assert _rows(recorder.path, METRICS_CHOSEN_FRONTIER, "SeriesLines:names")[-1] == ["LLM", "CU", "fused"]
 
 
 def test_the_target_is_boxed_on_the_map_and_the_view_is_fitted_to_the_mapped_area(tiny_scene, tmp_path):
-    runner = Runner(CONFIG.replace(sim=dataclasses.replace(CONFIG.sim, max_steps=60),
-                                   agent=AgentConfig(look_around_steps=2)))
+    runner = Runner(
+        CONFIG.replace(sim=dataclasses.replace(CONFIG.sim, max_steps=60), agent=AgentConfig(look_around_steps=2))
+    )
     recorder, _, _ = _record(runner, tiny_scene, "frontier", tmp_path)
     boxes = _rows(recorder.path, MAP_TARGET, "Boxes2D:labels")
     assert boxes and boxes[-1][0] == "target: toilet"
-    ranges = [c for bp in open_recording(recorder.path).blueprints()
-              for chunk in RrdReader(recorder.path).stream(store=bp)
-              if "VisualBounds2D:range" in chunk.to_record_batch().schema.names
-              for c in chunk.to_record_batch().column("VisualBounds2D:range").to_pylist() if c]
+    ranges = [
+        c
+        for bp in open_recording(recorder.path).blueprints()
+        for chunk in RrdReader(recorder.path).stream(store=bp)
+        if "VisualBounds2D:range" in chunk.to_record_batch().schema.names
+        for c in chunk.to_record_batch().column("VisualBounds2D:range").to_pylist()
+        if c
+    ]
     final = ranges[-1][0]  # sent at the end: the house mapped (<= 10 x 5 m at 5 cm), with a margin
     assert 0 < final["x_range"][1] - final["x_range"][0] <= 200 * 1.2 + 1
     assert 0 < final["y_range"][1] - final["y_range"][0] <= 200 * 1.2 + 1
@@ -196,8 +260,9 @@ def test_a_failing_event_is_counted_not_raised_and_the_file_still_closes(runner,
     bus = EventBus()
     recorder = Recorder.for_episode(tmp_path, "tiny", episode, "random-walk").attach(bus)
     first = runner.session(tiny_scene, "random-walk", bus).start(episode)
-    broken = dataclasses.replace(first, step=1, observation=dataclasses.replace(
-        first.observation, rgb=np.zeros((2, 3, 4, 5), np.uint8)))
+    broken = dataclasses.replace(
+        first, step=1, observation=dataclasses.replace(first.observation, rgb=np.zeros((2, 3, 4, 5), np.uint8))
+    )
     recorder(broken)  # called directly: the bus would swallow an exception, the recorder must not raise one
     assert recorder.errors == 1
     recorder.close()
@@ -243,7 +308,11 @@ def test_list_recordings_parses_names_newest_first_and_keeps_foreign_files(tmp_p
     infos = list_recordings(tmp_path)
     assert [i.path for i in infos] == [new, foreign, old]
     assert (infos[0].dataset, infos[0].scene, infos[0].episode_id, infos[0].policy) == (
-        "procedural", "house-4", 0, "frontier")
+        "procedural",
+        "house-4",
+        0,
+        "frontier",
+    )
     assert infos[0].size_bytes == 3 and infos[1].policy is None
     assert list_recordings(tmp_path / "absent") == []
 

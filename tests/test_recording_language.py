@@ -7,19 +7,26 @@ import math
 import pytest
 from rerun.chunk import RrdReader
 
-from l3mvn.core.config import AgentConfig, Config, SimConfig
-from l3mvn.run.events import EventBus
 from l3mvn.agent.language import GOALS
+from l3mvn.core.config import AgentConfig, Config, SimConfig
+from l3mvn.core.types import Pose
+from l3mvn.run.events import EventBus
 from l3mvn.run.recording import Recorder
 from l3mvn.run.recording.entities import (
-    LANGUAGE_CHOSEN, LANGUAGE_CHOSEN_METRES, LOG_FUSION, METRICS_LANGUAGE, TEXT_LOG, language_by_goal, reader_path,
+    LANGUAGE_CHOSEN,
+    LANGUAGE_CHOSEN_METRES,
+    LOG_FUSION,
+    METRICS_LANGUAGE,
+    TEXT_LOG,
+    language_by_goal,
+    reader_path,
 )
 from l3mvn.run.runner import Runner
-from l3mvn.core.types import Pose
 from l3mvn.world.episode import Episode
 
-CONFIG = Config(sim=dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=40),
-                agent=AgentConfig(look_around_steps=2))
+CONFIG = Config(
+    sim=dataclasses.replace(SimConfig().with_frame(60, 80), max_steps=40), agent=AgentConfig(look_around_steps=2)
+)
 
 
 pytestmark = pytest.mark.usefixtures("strict_rerun")  # a bad log call fails the test (conftest)
@@ -37,9 +44,15 @@ def _by_step(path, entity, column) -> dict[int, list]:
 
 
 def _static(path, entity, column) -> list:
-    return [v for chunk in RrdReader(path).stream() if chunk.entity_path == reader_path(entity)
-            for v in (chunk.to_record_batch().column(column).to_pylist()
-                      if column in chunk.to_record_batch().schema.names else []) if v is not None]
+    return [
+        v
+        for chunk in RrdReader(path).stream()
+        if chunk.entity_path == reader_path(entity)
+        for v in (
+            chunk.to_record_batch().column(column).to_pylist() if column in chunk.to_record_batch().schema.names else []
+        )
+        if v is not None
+    ]
 
 
 def _record(tiny_scene, tmp_path, policy: str, config: Config = CONFIG):
@@ -54,8 +67,11 @@ def _record(tiny_scene, tmp_path, policy: str, config: Config = CONFIG):
 
 def test_the_chosen_frontiers_per_goal_scores_and_the_fusion_line_are_recorded_per_step(tiny_scene, tmp_path):
     path, events = _record(tiny_scene, tmp_path, "l3mvn-zs")
-    chosen = {ev.step: ev.decision.frontiers[ev.decision.chosen_frontier] for ev in events
-              if ev.decision is not None and ev.decision.chosen_frontier is not None and ev.decision.frontiers}
+    chosen = {
+        ev.step: ev.decision.frontiers[ev.decision.chosen_frontier]
+        for ev in events
+        if ev.decision is not None and ev.decision.chosen_frontier is not None and ev.decision.frontiers
+    }
     assert chosen, "the agent never chose a frontier"
 
     assert _static(path, LANGUAGE_CHOSEN, "SeriesLines:names")[-1] == list(GOALS)
@@ -79,7 +95,10 @@ def test_the_chosen_frontiers_per_goal_scores_and_the_fusion_line_are_recorded_p
     # replayed or exported step never shows the last choice's rule behind a walk to the target.
     after = next(ev for ev in events if ev.step > max(chosen) and ev.decision is not None)
     assert after.decision.goal_kind != "frontier"
-    assert lines[after.step] == f"no frontier choice in force: the goal is {str(after.decision.goal_kind)!r}, not a frontier"
+    assert (
+        lines[after.step]
+        == f"no frontier choice in force: the goal is {str(after.decision.goal_kind)!r}, not a frontier"
+    )
     assert max(lines) == after.step  # and nothing more while no frontier is chosen again
     assert not _static(path, LANGUAGE_CHOSEN_METRES, "SeriesLines:names")  # the room scorer gives no metres
 
@@ -87,8 +106,11 @@ def test_the_chosen_frontiers_per_goal_scores_and_the_fusion_line_are_recorded_p
 def test_a_distance_head_records_the_chosen_frontiers_expected_metres_to_each_goal(tiny_scene, tmp_path):
     config = CONFIG.replace(policy=dataclasses.replace(CONFIG.policy, head="frontiers", selection="expected"))
     path, events = _record(tiny_scene, tmp_path, "l3mvn-ff", config)
-    chosen = {ev.step: ev.decision.frontiers[ev.decision.chosen_frontier] for ev in events
-              if ev.decision is not None and ev.decision.chosen_frontier is not None and ev.decision.frontiers}
+    chosen = {
+        ev.step: ev.decision.frontiers[ev.decision.chosen_frontier]
+        for ev in events
+        if ev.decision is not None and ev.decision.chosen_frontier is not None and ev.decision.frontiers
+    }
     assert chosen
     assert _static(path, LANGUAGE_CHOSEN_METRES, "SeriesLines:names")[-1] == list(GOALS)
     rows = _by_step(path, LANGUAGE_CHOSEN_METRES, "Scalars:scalars")

@@ -11,18 +11,41 @@ import urllib.request
 import pytest
 from conftest import serve_dashboard
 
-from l3mvn_studio.page_text import code
 from l3mvn.core.errors import L3MVNError
+from l3mvn_studio.page_text import code
 
 
 @pytest.fixture(scope="module")
 def dash(tmp_path_factory):
     rec = tmp_path_factory.mktemp("rec")
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1"}
-    subprocess.run([sys.executable, "-m", "l3mvn_studio.cli", "eval", "--policy", "frontier", "--houses", "1",
-                    "--episodes-per-house", "2", "--frame", "120x160", "--set", "sim.max_steps=15",
-                    "--out", str(rec / "out.jsonl"), "--record", "--record-dir", str(rec)],
-                   check=True, capture_output=True, env=env, timeout=600)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "l3mvn_studio.cli",
+            "eval",
+            "--policy",
+            "frontier",
+            "--houses",
+            "1",
+            "--episodes-per-house",
+            "2",
+            "--frame",
+            "120x160",
+            "--set",
+            "sim.max_steps=15",
+            "--out",
+            str(rec / "out.jsonl"),
+            "--record",
+            "--record-dir",
+            str(rec),
+        ],
+        check=True,
+        capture_output=True,
+        env=env,
+        timeout=600,
+    )
     yield from serve_dashboard(episodes_per_house=2, policy="frontier", record_dir=rec)
 
 

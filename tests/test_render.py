@@ -7,15 +7,14 @@ import math
 
 import numpy as np
 import pytest
+from test_world import two_rooms
 
 from l3mvn.core.config import SimConfig
 from l3mvn.core.errors import L3MVNError
-from l3mvn.world.sim.render import Renderer
 from l3mvn.core.types import Pose
-from l3mvn.world.sim.world import build_world
 from l3mvn.run.viz import category_palette, colorize_depth, colorize_semantic, legend, side_by_side
-
-from test_world import two_rooms
+from l3mvn.world.sim.render import Renderer
+from l3mvn.world.sim.world import build_world
 
 RES = 0.05
 ODD = (121, 161)  # odd sizes put the centre pixel exactly on the optical axis

@@ -23,8 +23,21 @@ METRICS = ("key", "success", "spl", "dtg", "steps", "failure")
 
 
 def eval_args(dataset: Path, out: Path | str, *extra: str) -> list[str]:
-    return ["eval", "--dataset", str(dataset), "--split", "val", "--policy", "oracle", "--frame", "60x80",
-            "--out", str(out), "--json", *extra]
+    return [
+        "eval",
+        "--dataset",
+        str(dataset),
+        "--split",
+        "val",
+        "--policy",
+        "oracle",
+        "--frame",
+        "60x80",
+        "--out",
+        str(out),
+        "--json",
+        *extra,
+    ]
 
 
 def lines_of(out: Path) -> list[bytes]:
@@ -65,6 +78,7 @@ def finished(tiny_dataset, tmp_path, capsys) -> Path:
 
 # --- torn tail -----------------------------------------------------------------------------------
 
+
 def test_a_torn_tail_is_set_aside_and_resume_keeps_every_episode_exactly_once(tiny_dataset, finished, capsys):
     *whole, last = lines_of(finished)
     torn = last[: len(last) // 2]
@@ -103,6 +117,7 @@ def test_a_fresh_run_never_glues_its_first_row_to_a_torn_tail(tiny_dataset, fini
 
 # --- unusable rows -------------------------------------------------------------------------------
 
+
 def test_unusable_rows_are_reported_in_one_line_and_run_again(tiny_dataset, finished, capsys):
     lines = lines_of(finished)
     rows = [json.loads(line) for line in lines]
@@ -132,42 +147,59 @@ def test_unusable_rows_are_reported_in_one_line_and_run_again(tiny_dataset, fini
 
 
 def valid_row() -> dict:
-    return {"key": "Tiny/0/1", "policy": "oracle", "config_hash": "abc", "rule": "semexp", "goal": "bed",
-            "success": 1.0, "spl": 0.8, "dtg": 0.0, "failure": "success", "steps": 30, "scene": "Tiny",
-            "episode_id": 1}
+    return {
+        "key": "Tiny/0/1",
+        "policy": "oracle",
+        "config_hash": "abc",
+        "rule": "semexp",
+        "goal": "bed",
+        "success": 1.0,
+        "spl": 0.8,
+        "dtg": 0.0,
+        "failure": "success",
+        "steps": 30,
+        "scene": "Tiny",
+        "episode_id": 1,
+    }
 
 
-@pytest.mark.parametrize("change,problem", [
-    ({}, None),
-    ({"spl": None, "dtg": None}, None),
-    ({"success": 0, "failure": "timeout", "spl": 0.0}, None),
-    ({"success": "1"}, "'success' is \"1\", not 0 or 1"),
-    ({"success": True}, "'success' is true, not 0 or 1"),
-    ({"success": 0.5}, "'success' is 0.5, not 0 or 1"),
-    ({"spl": math.nan}, "'spl' is NaN"),
-    ({"spl": 1.5}, "'spl' is 1.5"),
-    ({"dtg": -1}, "'dtg' is -1"),
-    ({"steps": "30"}, "'steps' is \"30\""),
-    ({"failure": "bored"}, "'failure' is \"bored\""),
-    ({"failure": "timeout"}, "'success' is 1.0 but 'failure' is \"timeout\""),
-    ({"rule": "geodesic"}, "but this config's rule is 'semexp'"),
-    ({"goal": {"name": "bed"}}, "'goal' is {\"name\": \"bed\"}"),
-    ({"key": None}, "'key' is null"),
-    ({"episode_id": "abc"}, "'episode_id' is \"abc\", not a whole number >= 0"),
-    ({"episode_id": math.inf}, "'episode_id' is Infinity"),
-    ({"episode_id": [1]}, "'episode_id' is [1]"),
-    ({"episode_id": 1.0}, "'episode_id' is 1.0"),
-    ({"scene": ""}, "'scene' is \"\", not a scene name"),
-])
+@pytest.mark.parametrize(
+    "change,problem",
+    [
+        ({}, None),
+        ({"spl": None, "dtg": None}, None),
+        ({"success": 0, "failure": "timeout", "spl": 0.0}, None),
+        ({"success": "1"}, "'success' is \"1\", not 0 or 1"),
+        ({"success": True}, "'success' is true, not 0 or 1"),
+        ({"success": 0.5}, "'success' is 0.5, not 0 or 1"),
+        ({"spl": math.nan}, "'spl' is NaN"),
+        ({"spl": 1.5}, "'spl' is 1.5"),
+        ({"dtg": -1}, "'dtg' is -1"),
+        ({"steps": "30"}, "'steps' is \"30\""),
+        ({"failure": "bored"}, "'failure' is \"bored\""),
+        ({"failure": "timeout"}, "'success' is 1.0 but 'failure' is \"timeout\""),
+        ({"rule": "geodesic"}, "but this config's rule is 'semexp'"),
+        ({"goal": {"name": "bed"}}, '\'goal\' is {"name": "bed"}'),
+        ({"key": None}, "'key' is null"),
+        ({"episode_id": "abc"}, "'episode_id' is \"abc\", not a whole number >= 0"),
+        ({"episode_id": math.inf}, "'episode_id' is Infinity"),
+        ({"episode_id": [1]}, "'episode_id' is [1]"),
+        ({"episode_id": 1.0}, "'episode_id' is 1.0"),
+        ({"scene": ""}, "'scene' is \"\", not a scene name"),
+    ],
+)
 def test_row_problem_names_the_first_field_the_summary_cannot_use(change, problem):
     found = row_problem({**valid_row(), **change}, "semexp")
     assert found == problem if problem is None else problem in found
 
 
-@pytest.mark.parametrize("row,problem", [
-    ([1, 2], "not a JSON object but [1, 2]"),
-    ({"key": "Tiny/0/1", "policy": "oracle", "config_hash": "abc"}, "no 'rule'"),
-])
+@pytest.mark.parametrize(
+    "row,problem",
+    [
+        ([1, 2], "not a JSON object but [1, 2]"),
+        ({"key": "Tiny/0/1", "policy": "oracle", "config_hash": "abc"}, "no 'rule'"),
+    ],
+)
 def test_row_problem_of_rows_without_metrics(row, problem):
     assert row_problem(row) == problem
 
@@ -195,8 +227,10 @@ def test_hostile_lines_are_reported_and_their_episodes_run_again(tiny_dataset, f
 
 # --- one writer at a time --------------------------------------------------------------------------
 
-def test_a_second_eval_on_a_running_evals_out_is_refused_and_writes_nothing(tiny_dataset, tmp_path, capsys,
-                                                                          monkeypatch):
+
+def test_a_second_eval_on_a_running_evals_out_is_refused_and_writes_nothing(
+    tiny_dataset, tmp_path, capsys, monkeypatch
+):
     import l3mvn.run.eval.backends as backends
 
     real = backends.run_local
@@ -215,15 +249,19 @@ def test_a_second_eval_on_a_running_evals_out_is_refused_and_writes_nothing(tiny
     assert main(eval_args(tiny_dataset, out)) == 0
     captured = capsys.readouterr()
     assert second == {"code": 2, "unchanged": True}
-    refusal = (f"error: {out} is being written by another l3mvn eval (pid {os.getpid()}); wait for it to "
-               "finish or choose another --out\n")
+    refusal = (
+        f"error: {out} is being written by another l3mvn eval (pid {os.getpid()}); wait for it to "
+        "finish or choose another --out\n"
+    )
     assert captured.err.count("error: ") == 1 and refusal in captured.err  # amid the first run's progress bar
     assert sorted(usable_keys(out)) == sorted(set(usable_keys(out))) and len(usable_keys(out)) == 8
     assert last_json(captured.out)["episodes"] == 8
 
 
-HOLD = "import fcntl, os, sys, time; fd = os.open(sys.argv[1], os.O_RDWR); fcntl.flock(fd, fcntl.LOCK_EX); " \
-       "print('held', flush=True); time.sleep(600)"
+HOLD = (
+    "import fcntl, os, sys, time; fd = os.open(sys.argv[1], os.O_RDWR); fcntl.flock(fd, fcntl.LOCK_EX); "
+    "print('held', flush=True); time.sleep(600)"
+)
 
 
 def test_the_lock_goes_with_its_holder_even_when_it_is_killed(tiny_dataset, finished, capsys):
@@ -242,6 +280,7 @@ def test_the_lock_goes_with_its_holder_even_when_it_is_killed(tiny_dataset, fini
 
 
 # --- bad paths and full disks ------------------------------------------------------------------------
+
 
 def _directory(tmp: Path) -> str:
     return str(tmp)
@@ -265,13 +304,16 @@ def _not_results(tmp: Path) -> str:
     return str(tmp / "paper.tex")
 
 
-@pytest.mark.parametrize("make,message", [
-    (_directory, "is a directory; give a file such as"),
-    (_under_a_file, "notes.txt is a file, not a folder"),
-    (_long_name, "File name too long"),
-    (_long_folder, "File name too long"),
-    (_not_results, "is not an l3mvn results file"),
-])
+@pytest.mark.parametrize(
+    "make,message",
+    [
+        (_directory, "is a directory; give a file such as"),
+        (_under_a_file, "notes.txt is a file, not a folder"),
+        (_long_name, "File name too long"),
+        (_long_folder, "File name too long"),
+        (_not_results, "is not an l3mvn results file"),
+    ],
+)
 def test_a_bad_out_path_is_one_line_and_status_2(make, message, tiny_dataset, tmp_path, capsys):
     where = tmp_path / "where"
     where.mkdir()
@@ -296,7 +338,8 @@ def test_a_full_device_stops_the_run_with_one_line(tiny_dataset, capsys):
     assert main(eval_args(tiny_dataset, "/dev/full")) == 2
     assert error_line(capsys.readouterr().err) == (
         "error: cannot write to /dev/full: No space left on device; the rows written before are kept "
-        "(--resume runs the rest)")
+        "(--resume runs the rest)"
+    )
 
 
 @pytest.mark.parametrize("device", ["/dev/null", "/dev/full"])
@@ -311,6 +354,7 @@ def _file_size_limit(limit: int):
     def apply() -> None:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # the write fails with EFBIG instead of killing
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
     return apply
 
 
@@ -322,11 +366,13 @@ def test_a_disk_that_fills_mid_row_keeps_the_rows_before_and_no_partial_line(tin
     capsys.readouterr()
     before = out.read_bytes()
     cmd = [sys.executable, "-m", "l3mvn.run.cli", *eval_args(tiny_dataset, out, "--resume")]
-    full = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300,
-                          preexec_fn=_file_size_limit(len(before) + 1000))
+    full = subprocess.run(
+        cmd, cwd=REPO, capture_output=True, text=True, timeout=300, preexec_fn=_file_size_limit(len(before) + 1000)
+    )
     assert full.returncode == 2 and "Traceback" not in full.stderr
-    assert error_line(full.stderr) == (f"error: cannot write to {out}: File too large; the rows written before "
-                                       "are kept (--resume runs the rest)")
+    assert error_line(full.stderr) == (
+        f"error: cannot write to {out}: File too large; the rows written before are kept (--resume runs the rest)"
+    )
     assert out.read_bytes() == before
     assert main(eval_args(tiny_dataset, out, "--resume")) == 0
     assert sorted(usable_keys(out)) == sorted(set(usable_keys(out))) and len(usable_keys(out)) == 8

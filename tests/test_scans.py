@@ -13,16 +13,16 @@ import pytest
 pytest.importorskip("trimesh")
 pytest.importorskip("embreex")
 
-from l3mvn.run.cli import main  # noqa: E402
+from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.config import Config, TaskConfig  # noqa: E402
+from l3mvn.core.errors import L3MVNError  # noqa: E402
+from l3mvn.run.cli import main  # noqa: E402
 from l3mvn.world.datasets import load_episode_set  # noqa: E402
 from l3mvn.world.datasets.hm3d_export import STOREY_M, add_export_arguments, export_hm3d, run_export  # noqa: E402
 from l3mvn.world.datasets.objectnav import geodesic_agreement  # noqa: E402
-from l3mvn.core.errors import L3MVNError  # noqa: E402
 from l3mvn.world.scenes.categories import SCAN_CATEGORIES  # noqa: E402
 from l3mvn.world.scenes.procedural import procedural_split  # noqa: E402
 from l3mvn.world.scenes.scan import ScanFloor, find_floors, read_semantic_txt  # noqa: E402
-from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.world.sim.simulator import BuiltinSimulator  # noqa: E402
 from l3mvn.world.sim.world import build_world  # noqa: E402
 from l3mvn.world.task.regions import goal_region  # noqa: E402
@@ -44,8 +44,14 @@ def eset(exported):
 
 
 def _source(exported: Path) -> list[str]:
-    return ["--dataset", str(exported / "objectnav_hm3d_v2"), "--scenes", str(exported / "scene_datasets"),
-            "--split", "val"]
+    return [
+        "--dataset",
+        str(exported / "objectnav_hm3d_v2"),
+        "--scenes",
+        str(exported / "scene_datasets"),
+        "--split",
+        "val",
+    ]
 
 
 def test_export_writes_hm3d_layout(exported):
@@ -54,7 +60,7 @@ def test_export_writes_hm3d_layout(exported):
     assert names == ["procedural-0000.glb", "procedural-0000.semantic.glb", "procedural-0000.semantic.txt"]
     assert (exported / "scene_datasets" / "hm3d_v0.2" / "hm3d_annotated_basis.scene_dataset_config.json").is_file()
     lines = (scene / "procedural-0000.semantic.txt").read_text().splitlines()
-    assert lines[0] == "HM3D Semantic Annotations" and lines[1].startswith('1,') and lines[1].endswith(',"wall",0')
+    assert lines[0] == "HM3D Semantic Annotations" and lines[1].startswith("1,") and lines[1].endswith(',"wall",0')
     import gzip
 
     content = json.load(gzip.open(exported / "objectnav_hm3d_v2" / "val" / "content" / "procedural-0000.json.gz"))
@@ -189,8 +195,24 @@ def test_oracle_succeeds_on_every_episode(exported, capsys):
 
 
 def test_frontier_runs_to_the_end_under_the_hm3d_rule(exported, capsys):
-    assert main(["eval", *_source(exported), "--policy", "frontier", "--frame", "120x160", "--episodes", "1",
-                 "--set", "sim.max_steps=80", "--json"]) == 0
+    assert (
+        main(
+            [
+                "eval",
+                *_source(exported),
+                "--policy",
+                "frontier",
+                "--frame",
+                "120x160",
+                "--episodes",
+                "1",
+                "--set",
+                "sim.max_steps=80",
+                "--json",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "success rule: hm3d" in out and "format objectnav_hm3d_v2" in out
     summary = json.loads(out.strip().splitlines()[-1])
@@ -244,8 +266,9 @@ def test_semantic_mesh_coloured_per_vertex(exported, eset, tmp_path):
     painted = _read_glb(path, (0.0, 1.0, 0.0), ids=True)  # one exact colour per triangle, from the texture
     vertices = painted.vertices[painted.faces.ravel()]
     colours = np.concatenate([np.repeat(painted.face_rgb, 3, axis=0), np.full((len(vertices), 1), 255)], axis=1)
-    mesh = trimesh.Trimesh(vertices, np.arange(len(vertices)).reshape(-1, 3), vertex_colors=colours.astype(np.uint8),
-                           process=False)
+    mesh = trimesh.Trimesh(
+        vertices, np.arange(len(vertices)).reshape(-1, 3), vertex_colors=colours.astype(np.uint8), process=False
+    )
     path.write_bytes(mesh.export(file_type="glb"))
     again = load_episode_set(exported / "objectnav_hm3d_v2", "val", scenes_dir=scans, cfg=HM3D)
     for f, floor in eset.scenes["procedural-0000"].items():
@@ -262,8 +285,12 @@ def _room(path: Path, step_m: float = 0.15, subdivisions: int = 0) -> Path:
         return trimesh.creation.box(extents=hi - lo, transform=centre)
 
     parts = [box((0, -0.1, 0), (6, 0, 4)), box((4, 0, 0), (6, step_m, 4)), box((0.5, 0, 1), (1.7, 0.5, 3))]
-    parts += [box((-0.1, 0, -0.1), (6.1, 2.5, 0)), box((-0.1, 0, 4), (6.1, 2.5, 4.1)),
-              box((-0.1, 0, 0), (0, 2.5, 4)), box((6, 0, 0), (6.1, 2.5, 4))]
+    parts += [
+        box((-0.1, 0, -0.1), (6.1, 2.5, 0)),
+        box((-0.1, 0, 4), (6.1, 2.5, 4.1)),
+        box((-0.1, 0, 0), (0, 2.5, 4)),
+        box((6, 0, 0), (6.1, 2.5, 4)),
+    ]
     mesh = trimesh.util.concatenate(parts)
     for _ in range(subdivisions):
         mesh = mesh.subdivide()
@@ -299,14 +326,15 @@ def test_rendered_mesh_merges_vertices_finer_than_the_setting(tmp_path):
 
     # Subdivided 4 times, the 10 cm thick walls and 15 cm step have edges under a centimetre.
     files = ScanFiles(_room(tmp_path / "fine.glb", subdivisions=4), None, None)
-    kept = load_scan("room", files, dataclasses.replace(HM3D.sim, scan_vertex_merge_m=0.0), goal_instances={},
-                     view_points=[])[0]
+    kept = load_scan(
+        "room", files, dataclasses.replace(HM3D.sim, scan_vertex_merge_m=0.0), goal_instances={}, view_points=[]
+    )[0]
     merged = load_scan("room", files, HM3D.sim, goal_instances={}, view_points=[])[0]
     assert merged.mesh.triangles.shape[0] < 0.8 * kept.mesh.triangles.shape[0]
     assert np.array_equal(merged.navigable, kept.navigable)  # the ground truth uses every triangle
+    from l3mvn.core.types import Pose
     from l3mvn.world.sim.render import Renderer
     from l3mvn.world.sim.world import build_world
-    from l3mvn.core.types import Pose
 
     view = Pose(*kept.cell_center(*np.argwhere(kept.navigable)[len(np.argwhere(kept.navigable)) // 2]), 0.0)
     a = Renderer(build_world(kept, HM3D.sim), HM3D.sim).render(view, 0.0)

@@ -15,12 +15,33 @@ DOWN = (0.0, 0.0, -1.0)
 
 def _view(*frontier_cells: tuple[int, int]) -> MapView:
     """A 40 x 60 cell map whose crop starts at cell (100, 200)."""
-    frontiers = tuple(FrontierMarker(id=i, cell=c, size=10, distance_m=1.0, s_cu=0.5, s_llm=None, fused=None,
-                                     objects=(), queries={}, reason="", chosen=False)
-                      for i, c in enumerate(frontier_cells))
-    return MapView(image=np.zeros((40, 60, 3), np.uint8), origin=(100, 200), scale=1, grid_shape=(480, 480),
-                   resolution_m=RES, source="agent map", agent_cell=(120, 230), agent_heading=0.0,
-                   frontiers=frontiers)
+    frontiers = tuple(
+        FrontierMarker(
+            id=i,
+            cell=c,
+            size=10,
+            distance_m=1.0,
+            s_cu=0.5,
+            s_llm=None,
+            fused=None,
+            objects=(),
+            queries={},
+            reason="",
+            chosen=False,
+        )
+        for i, c in enumerate(frontier_cells)
+    )
+    return MapView(
+        image=np.zeros((40, 60, 3), np.uint8),
+        origin=(100, 200),
+        scale=1,
+        grid_shape=(480, 480),
+        resolution_m=RES,
+        source="agent map",
+        agent_cell=(120, 230),
+        agent_heading=0.0,
+        frontiers=frontiers,
+    )
 
 
 def _above(cell: tuple[int, int]) -> tuple[float, float, float]:

@@ -5,13 +5,12 @@ import pickle
 
 import numpy as np
 import pytest
+from conftest import GIBSON, draw_two_room_house, needs_gibson
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from l3mvn.core.errors import L3MVNError
 from l3mvn.world.scenes.semexp import load_split, pick_floor, save_split
-
-from conftest import GIBSON, draw_two_room_house, needs_gibson
 
 
 def test_saved_split_loads_back_identically(tmp_path):
@@ -71,11 +70,14 @@ def _write_info(tmp_path, raw) -> None:
         pickle.dump(raw, fh)
 
 
-@pytest.mark.parametrize("payload", [
-    lambda marker: _Payload(os.system, f"touch {marker}"),
-    lambda marker: _Payload(eval, f"open({str(marker)!r}, 'w')"),
-    lambda marker: _Payload(pathlib.Path.touch, pathlib.Path(marker)),
-])
+@pytest.mark.parametrize(
+    "payload",
+    [
+        lambda marker: _Payload(os.system, f"touch {marker}"),
+        lambda marker: _Payload(eval, f"open({str(marker)!r}, 'w')"),
+        lambda marker: _Payload(pathlib.Path.touch, pathlib.Path(marker)),
+    ],
+)
 def test_a_crafted_map_file_runs_nothing(tmp_path, payload):
     marker = tmp_path / "pwned"
     floor = {"sem_map": np.zeros((2, 4, 4)), "origin": payload(marker)}
@@ -87,8 +89,11 @@ def test_a_crafted_map_file_runs_nothing(tmp_path, payload):
 
 def test_object_arrays_are_refused(tmp_path):
     _write_info(tmp_path, {"Odd": {0: {"sem_map": np.array([None, 1], dtype=object)}}})
-    with pytest.raises(L3MVNError, match=r"is not a SemExp map file \(an array of object: a SemExp map holds only "
-                                         r"numeric arrays\)"):
+    with pytest.raises(
+        L3MVNError,
+        match=r"is not a SemExp map file \(an array of object: a SemExp map holds only "
+        r"numeric arrays\)",
+    ):
         load_split(tmp_path, "val")
 
 
@@ -96,8 +101,10 @@ def test_the_format_still_loads_all_its_types(tmp_path):
     """Arrays of several dtypes, numpy scalars and plain numbers: what real SemExp files hold."""
     sem = np.zeros((3, 6, 6), np.float32)
     sem[0, 1:5, 1:5] = 1
-    _write_info(tmp_path, {"Ok": {0: {"sem_map": sem, "origin": np.array([10, 20], np.int64),
-                                      "floor_height": np.float64(0.25)}}})
+    _write_info(
+        tmp_path,
+        {"Ok": {0: {"sem_map": sem, "origin": np.array([10, 20], np.int64), "floor_height": np.float64(0.25)}}},
+    )
     floor = load_split(tmp_path, "val")["Ok"][0]
     assert floor.origin_cm == (10.0, 20.0) and floor.floor_height_m == 0.25 and floor.navigable.sum() == 16
 
@@ -113,6 +120,7 @@ def test_every_gibson_floor_loads_with_its_goals():
 
 # --- crafted numpy state: the loader builds every array itself ---------------------------------------
 
+
 def _valid_floor() -> dict:
     sem = np.zeros((3, 6, 6), np.float32)
     sem[0, 1:5, 1:5] = 1
@@ -122,8 +130,10 @@ def _valid_floor() -> dict:
 @pytest.mark.parametrize("protocol", range(pickle.HIGHEST_PROTOCOL + 1))
 def test_valid_maps_load_at_every_pickle_protocol(tmp_path, protocol):
     (tmp_path / "val").mkdir()
-    raw = {"Ok": {0: _valid_floor()}, "Wide": {1: {**_valid_floor(), "sem_map": np.asfortranarray(
-        _valid_floor()["sem_map"].astype(">f8"))}}}
+    raw = {
+        "Ok": {0: _valid_floor()},
+        "Wide": {1: {**_valid_floor(), "sem_map": np.asfortranarray(_valid_floor()["sem_map"].astype(">f8"))}},
+    }
     (tmp_path / "val" / "val_info.pbz2").write_bytes(bz2.compress(pickle.dumps(raw, protocol=protocol)))
     scenes = load_split(tmp_path, "val")
     assert scenes["Ok"][0].navigable.sum() == 16 and scenes["Wide"][1].navigable.sum() == 16
@@ -132,14 +142,18 @@ def test_valid_maps_load_at_every_pickle_protocol(tmp_path, protocol):
 
 def _with_dtype_state(protocol: int, state: tuple) -> bytes:
     """A valid map's pickle whose sem_map dtype is given ``state`` (numpy's __setstate__ tuple)."""
+
     class Crafted:
         def __reduce__(self):
             return np.dtype, ("f4", False, True), state
 
     class Array:
         def __reduce__(self):
-            return (np.ndarray.__reduce__(np.zeros(0))[0], (np.ndarray, (0,), b"b"),
-                    (1, (3, 6, 6), Crafted(), False, _valid_floor()["sem_map"].tobytes()))
+            return (
+                np.ndarray.__reduce__(np.zeros(0))[0],
+                (np.ndarray, (0,), b"b"),
+                (1, (3, 6, 6), Crafted(), False, _valid_floor()["sem_map"].tobytes()),
+            )
 
     return pickle.dumps({"Ok": {0: {**_valid_floor(), "sem_map": Array()}}}, protocol=protocol)
 
@@ -156,8 +170,12 @@ def _outcome(tmp_path, protocol: int, state: tuple) -> str:
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(flags=st.integers(-(2**63), 2**63 - 1), order=st.sampled_from(["<", ">", "|", "=", "x", ""]),
-       sizes=st.tuples(st.integers(-3, 64), st.integers(-3, 64)), protocol=st.integers(0, pickle.HIGHEST_PROTOCOL))
+@given(
+    flags=st.integers(-(2**63), 2**63 - 1),
+    order=st.sampled_from(["<", ">", "|", "=", "x", ""]),
+    sizes=st.tuples(st.integers(-3, 64), st.integers(-3, 64)),
+    protocol=st.integers(0, pickle.HIGHEST_PROTOCOL),
+)
 def test_crafted_dtype_state_never_reaches_numpy(tmp_path, flags, order, sizes, protocol):
     """Whatever flags and sizes a file gives a dtype (0x01 claims an array of objects, 0x3f makes
     numpy raise SystemError), the outcome is that of the plain dtype: only the byte order is read, and a

@@ -22,11 +22,9 @@ from pathlib import Path
 
 import psutil
 import pytest
-from conftest import draw_two_room_house
+from conftest import draw_two_room_house, free_port
 
-from conftest import free_port
 from l3mvn.core.config import Config, SimConfig
-from l3mvn.world.episodes import generate_episodes
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.events import EventBus
 from l3mvn.run.recording import (
@@ -38,6 +36,7 @@ from l3mvn.run.recording import (
 )
 from l3mvn.run.recording.catalogue import RecordingCut
 from l3mvn.run.runner import Runner
+from l3mvn.world.episodes import generate_episodes
 
 ROOT = Path(__file__).resolve().parents[1]
 ENTRY = "import sys; from l3mvn_studio.cli import main; sys.exit(main())"  # what the installed `l3mvn` runs
@@ -51,15 +50,24 @@ class Cli:
 
     def __init__(self, *argv: str) -> None:
         env = {**os.environ, "HF_HUB_OFFLINE": "1", "TRANSFORMERS_OFFLINE": "1", "PYTHONUNBUFFERED": "1"}
-        self.proc = subprocess.Popen([sys.executable, "-c", ENTRY, *argv], cwd=ROOT, env=env, text=True,
-                                     stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                     start_new_session=True)
+        self.proc = subprocess.Popen(
+            [sys.executable, "-c", ENTRY, *argv],
+            cwd=ROOT,
+            env=env,
+            text=True,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            start_new_session=True,
+        )
         self.seen: list[psutil.Process] = []
         self.stdout: list[str] = []
         self.stderr: list[str] = []
         self._lines: queue.Queue[str] = queue.Queue()
-        self._readers = [threading.Thread(target=self._drain, args=(self.proc.stdout, self.stdout, True), daemon=True),
-                         threading.Thread(target=self._drain, args=(self.proc.stderr, self.stderr, False), daemon=True)]
+        self._readers = [
+            threading.Thread(target=self._drain, args=(self.proc.stdout, self.stdout, True), daemon=True),
+            threading.Thread(target=self._drain, args=(self.proc.stderr, self.stderr, False), daemon=True),
+        ]
         for reader in self._readers:
             reader.start()
 
@@ -200,11 +208,14 @@ def test_serve_on_a_busy_port_refuses_naming_it_instead_of_taking_the_next(cli):
     assert free is None or int(free.group(1)) > port
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--port", "99999"], "--port must lie in 1..65535, got 99999"),
-    (["--port", "-1"], "--port must lie in 1..65535, got -1"),
-    (["--host", "no.such.host.invalid"], "--host no.such.host.invalid: cannot resolve it"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--port", "99999"], "--port must lie in 1..65535, got 99999"),
+        (["--port", "-1"], "--port must lie in 1..65535, got -1"),
+        (["--host", "no.such.host.invalid"], "--host no.such.host.invalid: cannot resolve it"),
+    ],
+)
 def test_serve_with_a_bad_port_or_host_is_one_line_and_status_2(cli, argv, message):
     line = _one_error_line(cli(*SERVE, *argv, *([] if "--port" in argv else ["--port", str(free_port())])))
     assert message in line
@@ -252,8 +263,10 @@ def _serving_viewer(cli, recording: Path) -> tuple[Cli, int, int, list[psutil.Pr
     c = cli("replay", str(recording), "--web", "--port", str(free_port()))
     ports = c.wait_for(r"HTTP port (\d+), data port (\d+)")
     web, data = int(ports.group(1)), int(ports.group(2))
-    if not _poll(lambda: c.proc.poll() is not None or (_accepts(web) and _accepts(data)), START_S) \
-            or c.proc.poll() is not None:
+    if (
+        not _poll(lambda: c.proc.poll() is not None or (_accepts(web) and _accepts(data)), START_S)
+        or c.proc.poll() is not None
+    ):
         pytest.skip(f"the rerun web viewer cannot run here (exit {c.proc.poll()}): {c.stderr_text()}")
     viewers = c.descendants()
     assert viewers, "the viewer should be a child process"
@@ -281,10 +294,13 @@ def test_the_viewer_dies_with_replay_when_replay_is_killed_outright(cli, recordi
     assert _poll(lambda: not _accepts(web) and not _accepts(data), STOP_S)
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--port", "99999"], "--port must lie in 1..65535, got 99999"),
-    (["--host", "no.such.host.invalid"], "--host no.such.host.invalid: cannot resolve it"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--port", "99999"], "--port must lie in 1..65535, got 99999"),
+        (["--host", "no.such.host.invalid"], "--host no.such.host.invalid: cannot resolve it"),
+    ],
+)
 def test_replay_web_with_a_bad_port_or_host_is_one_line_and_status_2(cli, recording, argv, message):
     line = _one_error_line(cli("replay", str(recording), "--web", *argv))
     assert message in line
@@ -302,8 +318,7 @@ def _replay_args(*argv: str):
 
 
 @pytest.mark.parametrize("fraction", [0.3, 0.6, 0.95])
-def test_a_cut_recording_reads_back_the_steps_before_the_cut_and_says_what_was_lost(recording, tmp_path,
-                                                                                    fraction):
+def test_a_cut_recording_reads_back_the_steps_before_the_cut_and_says_what_was_lost(recording, tmp_path, fraction):
     whole = read_recording(recording)
     data = recording.read_bytes()
     cut = tmp_path / "cut.rrd"
@@ -335,5 +350,8 @@ def test_replay_of_a_cut_recording_warns_what_it_shows_instead_of_refusing_it(re
         with pytest.raises(L3MVNError, match=f"port {port} is in use"):
             run_replay(_replay_args(str(cut), "--web", "--port", str(port)))
     warning = capsys.readouterr().err
-    assert re.search(r"warning: .*cut\.rrd ends inside a message .* the viewer shows what precedes the cut "
-                     r"\(steps 0\.\.\d+\)", warning), warning
+    assert re.search(
+        r"warning: .*cut\.rrd ends inside a message .* the viewer shows what precedes the cut "
+        r"\(steps 0\.\.\d+\)",
+        warning,
+    ), warning

@@ -13,15 +13,15 @@ import numpy as np
 import pytest
 
 from l3mvn.core.config import Config, SimConfig
-from l3mvn.world.episodes import generate_episodes
 from l3mvn.core.errors import L3MVNError
+from l3mvn.run.eval.result_videos import add_export_arguments, export_result_video, result_video_name, run_export
 from l3mvn.run.events import EventBus
 from l3mvn.run.recording import Recorder, read_recording
-from l3mvn.run.eval.result_videos import add_export_arguments, export_result_video, result_video_name, run_export
 from l3mvn.run.recording.drawing import PANEL_BG, VideoOptions, frames
 from l3mvn.run.recording.recorded import read_episode
 from l3mvn.run.recording.video import export_video
 from l3mvn.run.runner import Runner
+from l3mvn.world.episodes import generate_episodes
 from l3mvn.world.scenes.procedural import generate_house
 
 MAX_STEPS = 24
@@ -76,7 +76,7 @@ def test_the_mp4_has_the_title_card_then_one_frame_per_step_at_the_stated_size(r
     assert video.height == 240 + 56  # the panels, then the text band
     assert 320 + 6 + 0.75 * 240 <= video.width <= 320 + 6 + 1.6 * 240 + 1  # 4:3 camera, the map at its aspect
     title, first_step = frames[0].astype(int), frames[5].astype(int)
-    banner = title[5: video.height // 4 - 5, :].reshape(-1, 3).mean(axis=0)
+    banner = title[5 : video.height // 4 - 5, :].reshape(-1, 3).mean(axis=0)
     failed = result.success == 0.0
     assert (banner[0] > banner[1] + 60) == failed and (banner[1] > banner[0] + 60) == (not failed)  # red / green
     assert all(np.abs(f.astype(int) - title).mean() < 4 for f in frames[:5])  # the card is held
@@ -165,11 +165,16 @@ def test_a_gif_is_written_beside_the_mp4(recorded, tmp_path):
         assert gif.n_frames == 1 + video.steps and gif.size == (video.width, video.height)
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda d: d / "absent.rrd", r"absent.rrd not found"),
-    (lambda d: (d / "junk.rrd").write_bytes(b"not rerun at all") and d / "junk.rrd",
-     "junk.rrd is not a readable rerun"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda d: d / "absent.rrd", r"absent.rrd not found"),
+        (
+            lambda d: (d / "junk.rrd").write_bytes(b"not rerun at all") and d / "junk.rrd",
+            "junk.rrd is not a readable rerun",
+        ),
+    ],
+)
 def test_bad_recordings_are_one_line_errors(tmp_path, make, message):
     with pytest.raises(L3MVNError, match=message) as err:
         export_video(make(tmp_path), tmp_path / "x.mp4")
@@ -194,9 +199,20 @@ def test_bad_options_and_names_are_one_line_errors(recorded, tmp_path):
 
 def _row(path, **kw):
     ep = read_episode(path)
-    row = {"key": f"{ep.scene}/0/{ep.episode_id}", "scene": ep.scene, "episode_id": int(ep.episode_id),
-           "policy": ep.policy, "success": 0.0, "failure": "unseen_in_explored", "config_hash": "c0ffee",
-           "rule": "semexp", "goal": "chair", "spl": 0.0, "dtg": 2.5, "steps": 40}
+    row = {
+        "key": f"{ep.scene}/0/{ep.episode_id}",
+        "scene": ep.scene,
+        "episode_id": int(ep.episode_id),
+        "policy": ep.policy,
+        "success": 0.0,
+        "failure": "unseen_in_explored",
+        "config_hash": "c0ffee",
+        "rule": "semexp",
+        "goal": "chair",
+        "spl": 0.0,
+        "dtg": 2.5,
+        "steps": 40,
+    }
     return {**row, **kw}
 
 
@@ -226,24 +242,42 @@ def test_the_export_command_single_and_batch(recorded, tmp_path, capsys):
     assert "one.mp4: " in capsys.readouterr().out and (tmp_path / "one.mp4").stat().st_size > 0
 
     results = tmp_path / "results.jsonl"
-    rows = [_row(path), _row(path, scene="elsewhere", key="elsewhere/0/0"), _row(path, success=1.0, failure="success",
-                                                                               key="ok")]
+    rows = [
+        _row(path),
+        _row(path, scene="elsewhere", key="elsewhere/0/0"),
+        _row(path, success=1.0, failure="success", key="ok"),
+    ]
     results.write_text("".join(json.dumps(r) + "\n" for r in rows))
     out = tmp_path / "videos"
-    assert _cli("--results", str(results), "--recordings", str(path.parent), "--out", str(out),
-                "--failures", "--height", "160") == 0
+    assert (
+        _cli(
+            "--results",
+            str(results),
+            "--recordings",
+            str(path.parent),
+            "--out",
+            str(out),
+            "--failures",
+            "--height",
+            "160",
+        )
+        == 0
+    )
     assert sorted(p.name for p in out.iterdir()) == ["fail_unseen_in_explored_procedural-0003_0.mp4"]
     captured = capsys.readouterr()
     assert "skipped elsewhere/0/0: no recording" in captured.err and "wrote 1 videos" in captured.out
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["x.mp4"], "export needs VIDEO.mp4 --recording"),
-    (["--results", "r.jsonl"], "--results needs --recordings"),
-    (["x.mp4", "--recording", "r.rrd", "--out", "d"], "go with --results"),
-    (["--results", "absent.jsonl", "--recordings", ".", "--out", "d"], "results file absent.jsonl not found"),
-    (["--results", ".", "--recordings", ".", "--out", "d"], "results file . is a folder, not a regular file"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["x.mp4"], "export needs VIDEO.mp4 --recording"),
+        (["--results", "r.jsonl"], "--results needs --recordings"),
+        (["x.mp4", "--recording", "r.rrd", "--out", "d"], "go with --results"),
+        (["--results", "absent.jsonl", "--recordings", ".", "--out", "d"], "results file absent.jsonl not found"),
+        (["--results", ".", "--recordings", ".", "--out", "d"], "results file . is a folder, not a regular file"),
+    ],
+)
 def test_bad_export_flags_are_one_line_cli_errors(argv, message, capsys):
     assert _cli(*argv) == 2
     err = capsys.readouterr().err
@@ -254,12 +288,21 @@ def test_malformed_result_lines_are_named_and_skipped(recorded, tmp_path, capsys
     """Each bad line is one line on stderr naming it; the good episode is still exported."""
     path, _ = recorded
     bad = tmp_path / "r.jsonl"
-    lines = ['{"scene": "a", "success": 0}', "{oops", json.dumps(_row(path)), json.dumps(_row(path, episode_id="abc")),
-             json.dumps(_row(path)).replace('"dtg": 2.5', '"dtg": 1e400'), "[" * 100_000 + "]" * 100_000,
-             json.dumps(_row(path)).replace('"spl": 0.0', '"spl": NaN'), json.dumps(_row(path, episode_id=[1]))]
+    lines = [
+        '{"scene": "a", "success": 0}',
+        "{oops",
+        json.dumps(_row(path)),
+        json.dumps(_row(path, episode_id="abc")),
+        json.dumps(_row(path)).replace('"dtg": 2.5', '"dtg": 1e400'),
+        "[" * 100_000 + "]" * 100_000,
+        json.dumps(_row(path)).replace('"spl": 0.0', '"spl": NaN'),
+        json.dumps(_row(path, episode_id=[1])),
+    ]
     bad.write_text("\n".join(lines) + "\n")
-    assert _cli("--results", str(bad), "--recordings", str(path.parent), "--out", str(tmp_path / "o"),
-                "--height", "160") == 0
+    assert (
+        _cli("--results", str(bad), "--recordings", str(path.parent), "--out", str(tmp_path / "o"), "--height", "160")
+        == 0
+    )
     err = capsys.readouterr().err.splitlines()
     assert [re.search(r"r\.jsonl: skipped line (\d+): ", line).group(1) for line in err] == list("1245678")
     assert "line 4: 'episode_id' is \"abc\", not a whole number >= 0" in err[2]
@@ -282,4 +325,4 @@ def test_a_map_label_beside_the_panel_edge_stays_whole_inside_it(at):
     box = _place_label(img, "target: toilet", at, placed, (255, 255, 255))
     assert 0 <= box[0] and 0 <= box[1] and box[2] < 320 and box[3] < 120
     assert not (box[0] <= at[0] <= box[2] and box[1] <= at[1] <= box[3])  # never over its own point
-    assert img[box[1]:box[3] + 1, box[0]:box[2] + 1].any() and placed[-1] == box
+    assert img[box[1] : box[3] + 1, box[0] : box[2] + 1].any() and placed[-1] == box

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import GIBSON, needs_gibson
 from scipy import ndimage as ndi
 
 from l3mvn.core.config import SimConfig
 from l3mvn.core.grid import disk
 from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.sim.world import build_world, category_profile, wall_grids
-
-from conftest import GIBSON, needs_gibson
 
 # Two rooms split by a one-cell wall at column 56 with a door in rows 23..36, a bed against the
 # north wall, a free-standing toilet, and a one-cell map speck in the west room.
@@ -167,9 +166,9 @@ def _area(tris: np.ndarray) -> float:
 
 @needs_gibson
 def test_every_gibson_floor_builds_compactly_and_no_walkable_camera_is_inside_a_wall():
+    from l3mvn.core.types import Pose
     from l3mvn.world.scenes.semexp import load_split
     from l3mvn.world.sim.render import Renderer
-    from l3mvn.core.types import Pose
 
     cfg = SimConfig(min_depth_m=1e-3)
     rng = np.random.default_rng(0)
@@ -213,8 +212,8 @@ def test_no_goal_object_of_the_gibson_houses_is_walled_in():
 
 def _pixels(scene: SceneMap, category: str, row: int, col: int, heading: float) -> int:
     """Pixels of ``category`` seen from the cell (row, col) at camera height, tilt 0, 120x160."""
-    from l3mvn.world.sim.render import Renderer
     from l3mvn.core.types import Pose
+    from l3mvn.world.sim.render import Renderer
 
     assert scene.walkable[row, col], "the viewpoint must be a standing pose"
     x, y = scene.cell_center(row, col)

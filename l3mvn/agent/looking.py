@@ -44,8 +44,14 @@ def unknown_near(sem_map: SemanticMap, cell: Cell, radius_cells: float) -> Cell 
     return int(round(rows[near].mean())) + r0, int(round(cols[near].mean())) + c0
 
 
-def pick_viewpoint(sem_map: SemanticMap, target: np.ndarray, planner: LocalPlanner, views: list[float],
-                   min_cells: float, max_cells: float) -> tuple[Cell, float] | None:
+def pick_viewpoint(
+    sem_map: SemanticMap,
+    target: np.ndarray,
+    planner: LocalPlanner,
+    views: list[float],
+    min_cells: float,
+    max_cells: float,
+) -> tuple[Cell, float] | None:
     """A reachable explored cell ``min_cells``-``max_cells`` from the glimpsed ``target``, on the
     bearing (from the target) most unlike ``views`` and the agent's own, nearest first among equals:
     a slit or a depth gap rarely repeats from there. Returns it with the agent's bearing, or None."""
@@ -66,8 +72,9 @@ def pick_viewpoint(sem_map: SemanticMap, target: np.ndarray, planner: LocalPlann
     return (int(cells[best, 0]), int(cells[best, 1])), here
 
 
-def look_goal(sem_map: SemanticMap, planner: LocalPlanner, done: list[Cell], done_radius_cells: float,
-              min_area_m2: float) -> Cell | None:
+def look_goal(
+    sem_map: SemanticMap, planner: LocalPlanner, done: list[Cell], done_radius_cells: float, min_area_m2: float
+) -> Cell | None:
     """The nearest reachable cell of the areas explored but not looked at (each at least
     ``min_area_m2``, away from the ``done`` goals), or None."""
     glimpsed = sem_map.explored & ~sem_map.looked & ~sem_map.obstacle
@@ -98,9 +105,17 @@ def look_goal(sem_map: SemanticMap, planner: LocalPlanner, done: list[Cell], don
     return int(r), int(c)
 
 
-def far_sighting(sem_map: SemanticMap, depth: np.ndarray, semantic: np.ndarray, goal_id: int, focal_px: float,
-                 reach_cells: float, fractions: tuple[float, float], done: list[Cell],
-                 done_radius_cells: float) -> Cell | None:
+def far_sighting(
+    sem_map: SemanticMap,
+    depth: np.ndarray,
+    semantic: np.ndarray,
+    goal_id: int,
+    focal_px: float,
+    reach_cells: float,
+    fractions: tuple[float, float],
+    done: list[Cell],
+    done_radius_cells: float,
+) -> Cell | None:
     """The map cell ``reach_cells`` out along the bearing of ``goal_id`` pixels without depth (seen
     beyond the depth range), when they fill a share of the frame within ``fractions`` (more is too
     near to have depth) and do not point within ``done_radius_cells`` of a ``done`` goal; else None."""

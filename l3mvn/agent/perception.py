@@ -103,8 +103,9 @@ class Perception:
         semantic = self.noise(semantic)
         mapper = self._mapper
         if mapper is None or (mapper.intrinsics.height, mapper.intrinsics.width) != depth.shape:
-            mapper = self._mapper = SemanticMapper.for_sim(self.config.map, self.config.sim, depth.shape[0],
-                                                           depth.shape[1], self.categories)
+            mapper = self._mapper = SemanticMapper.for_sim(
+                self.config.map, self.config.sim, depth.shape[0], depth.shape[1], self.categories
+            )
             self._fresh = True
         if self._fresh:
             mapper.reset(self._start)

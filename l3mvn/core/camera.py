@@ -38,7 +38,7 @@ class CameraIntrinsics:
             raise L3MVNError(f"camera_height_m must be positive, got {self.camera_height_m}")
 
     @classmethod
-    def from_sim(cls, cfg: SimConfig, height: int, width: int) -> "CameraIntrinsics":
+    def from_sim(cls, cfg: SimConfig, height: int, width: int) -> CameraIntrinsics:
         """The task camera at the resolution the mapper is fed (e.g. 120x160 after downsampling)."""
         return cls(height=height, width=width, hfov_deg=cfg.hfov_deg, camera_height_m=cfg.camera_height_m)
 

@@ -10,6 +10,19 @@ GOAL_CATEGORIES: tuple[str, ...] = ("chair", "couch", "potted plant", "bed", "to
 
 # Channels 1..15 of SemExp maps (the COCO-derived ObjectNav categories).
 GIBSON_CATEGORIES: tuple[str, ...] = (
-    "chair", "couch", "potted plant", "bed", "toilet", "tv", "dining-table", "oven", "sink",
-    "refrigerator", "book", "clock", "vase", "cup", "bottle",
+    "chair",
+    "couch",
+    "potted plant",
+    "bed",
+    "toilet",
+    "tv",
+    "dining-table",
+    "oven",
+    "sink",
+    "refrigerator",
+    "book",
+    "clock",
+    "vase",
+    "cup",
+    "bottle",
 )

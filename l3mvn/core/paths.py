@@ -20,11 +20,17 @@ SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 def plain_name(value: object, what: str, example: str) -> str:
     """``value`` when it can be one file or folder name (printable, no '/' or '\\', not '.' or '..');
     else a one-line L3MVNError naming ``what`` and an ``example`` of a valid one."""
-    if not isinstance(value, str) or not value or not value.isprintable() or any(c in value for c in "/\\") \
-            or value in (".", ".."):
+    if (
+        not isinstance(value, str)
+        or not value
+        or not value.isprintable()
+        or any(c in value for c in "/\\")
+        or value in (".", "..")
+    ):
         shown = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
-        raise L3MVNError(f"{what} must be a plain name such as {example!r} (no '/' or '\\', not '.' or '..'), "
-                         f"got {shown}")
+        raise L3MVNError(
+            f"{what} must be a plain name such as {example!r} (no '/' or '\\', not '.' or '..'), got {shown}"
+        )
     return value
 
 

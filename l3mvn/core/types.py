@@ -29,7 +29,7 @@ class Action(enum.IntEnum):
     LOOK_DOWN = 5
 
     @classmethod
-    def parse(cls, value: "Action | int | str") -> "Action":
+    def parse(cls, value: Action | int | str) -> Action:
         if isinstance(value, Action):
             return value
         if isinstance(value, str):

@@ -61,7 +61,9 @@ def replacing_path(path: str | Path, what: str, *, check: Callable[[Path], None]
     it is checked (``check`` may raise an L3MVNError of its own), synced and renamed over ``path``."""
     target = Path(path)
     in_place = _special(target)
-    temporary = target if in_place else target.with_name(f".{target.name}.partial-{secrets.token_hex(4)}{target.suffix}")
+    temporary = (
+        target if in_place else target.with_name(f".{target.name}.partial-{secrets.token_hex(4)}{target.suffix}")
+    )
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

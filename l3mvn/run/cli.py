@@ -9,9 +9,9 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 from l3mvn.core.config import SUCCESS_RULES, Config, PolicyConfig, TaskConfig, config_dict, config_hash, override
 from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS, SELECTIONS
@@ -41,22 +41,43 @@ def _positive(text: str) -> int:
 
 
 def _add_sim_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--rule", choices=SUCCESS_RULES, default=None,
-                   help="success rule (default: the dataset's: habitat's view-point rule for HM3D / MP3D episode "
-                        "files, else SemExp's Gibson rule, as in the paper's table)")
-    p.add_argument("--frame", type=_frame, default=None, metavar="HxW",
-                   help="render size (default 480x640; 120x160 is what the mapper consumes)")
-    p.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
-                   help="override any config field, e.g. --set sim.max_steps=300 or --set agent.replan_every=5 "
-                        "(`l3mvn config` lists them all)")
+    p.add_argument(
+        "--rule",
+        choices=SUCCESS_RULES,
+        default=None,
+        help="success rule (default: the dataset's: habitat's view-point rule for HM3D / MP3D episode "
+        "files, else SemExp's Gibson rule, as in the paper's table)",
+    )
+    p.add_argument(
+        "--frame",
+        type=_frame,
+        default=None,
+        metavar="HxW",
+        help="render size (default 480x640; 120x160 is what the mapper consumes)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.FIELD=VALUE",
+        help="override any config field, e.g. --set sim.max_steps=300 or --set agent.replan_every=5 "
+        "(`l3mvn config` lists them all)",
+    )
 
 
 def _add_source_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dataset", default=None,
-                   help="SemExp-format or habitat ObjectNav (objectnav_hm3d v1/v2, objectnav_mp3d) dataset directory "
-                        "(default: procedural houses)")
-    p.add_argument("--scenes", default=None, metavar="DIR",
-                   help="scan root of a habitat ObjectNav --dataset (e.g. data/scene_datasets)")
+    p.add_argument(
+        "--dataset",
+        default=None,
+        help="SemExp-format or habitat ObjectNav (objectnav_hm3d v1/v2, objectnav_mp3d) dataset directory "
+        "(default: procedural houses)",
+    )
+    p.add_argument(
+        "--scenes",
+        default=None,
+        metavar="DIR",
+        help="scan root of a habitat ObjectNav --dataset (e.g. data/scene_datasets)",
+    )
     p.add_argument("--split", default="val", help="split name inside --dataset (default: val)")
     p.add_argument("--houses", type=_positive, default=5, help="procedural houses when no --dataset (default 5)")
     p.add_argument("--seed", type=int, default=0, help="seed for procedural houses, episodes and policies")
@@ -97,15 +118,21 @@ class Command:
 
 def _library_commands() -> dict[str, Command]:
     """Commands whose arguments and run live beside what they drive."""
-    from l3mvn.world.datasets import hm3d_export
     from l3mvn.run.eval import result_videos
+    from l3mvn.world.datasets import hm3d_export
 
     return {
-        "export": Command("write an MP4 (--gif: and a GIF) of a recorded episode, or of the (failed) episodes of "
-                          "a result file", result_videos.add_export_arguments, result_videos.run_export),
-        "export-hm3d": Command("export procedural houses as scans in HM3D's layout, with an objectnav_hm3d_v2 "
-                               "episode file (to run them here and on habitat-sim)", hm3d_export.add_export_arguments,
-                               hm3d_export.run_export),
+        "export": Command(
+            "write an MP4 (--gif: and a GIF) of a recorded episode, or of the (failed) episodes of a result file",
+            result_videos.add_export_arguments,
+            result_videos.run_export,
+        ),
+        "export-hm3d": Command(
+            "export procedural houses as scans in HM3D's layout, with an objectnav_hm3d_v2 "
+            "episode file (to run them here and on habitat-sim)",
+            hm3d_export.add_export_arguments,
+            hm3d_export.run_export,
+        ),
     }
 
 
@@ -118,53 +145,97 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     ev = sub.add_parser("eval", help="run episodes with a policy and report SR / SPL / DTG")
     _add_source_args(ev)
     _add_sim_args(ev)
-    ev.add_argument("--policy", required=True, choices=policy_names(driven=False),
-                    help="(teleop is driven by hand: `l3mvn serve`)")
+    ev.add_argument(
+        "--policy", required=True, choices=policy_names(driven=False), help="(teleop is driven by hand: `l3mvn serve`)"
+    )
     ev.add_argument("--episodes", type=_positive, default=None, help="run only the first N episodes")
     ev.add_argument("--episodes-per-house", type=_positive, default=10, help="procedural episodes per house")
     ev.add_argument("--out", default=None, help="append one JSON line per finished episode here")
     ev.add_argument("--resume", action="store_true", help="skip episodes already in --out (same policy and config)")
     ev.add_argument("--json", action="store_true", help="print the summary as one JSON object on the last line")
-    ev.add_argument("--workers", type=_positive, default=None,
-                    help="episodes run in parallel (default: 1 locally, one per CPU on Ray)")
-    ev.add_argument("--backend", choices=["local", "ray"], default="local",
-                    help="local worker processes, or Ray actors (pip install 'l3mvn[distributed]')")
-    ev.add_argument("--address", default=None,
-                    help="Ray cluster to join (auto, HOST:PORT, ray://HOST:10001); default: a private local Ray")
+    ev.add_argument(
+        "--workers",
+        type=_positive,
+        default=None,
+        help="episodes run in parallel (default: 1 locally, one per CPU on Ray)",
+    )
+    ev.add_argument(
+        "--backend",
+        choices=["local", "ray"],
+        default="local",
+        help="local worker processes, or Ray actors (pip install 'l3mvn[distributed]')",
+    )
+    ev.add_argument(
+        "--address",
+        default=None,
+        help="Ray cluster to join (auto, HOST:PORT, ray://HOST:10001); default: a private local Ray",
+    )
     ev.add_argument("--scorer", default=None, help="language policies: scorer instead of the policy's default")
-    ev.add_argument("--selection", choices=SELECTIONS, default="paper",
-                    help="language policies: the paper's bound rule, the official code's thresholds, or expected "
-                         "(least cost-utility metres + the frontier head's expected metres; needs --head "
-                         "frontiers or frontiers-bag)")
-    ev.add_argument("--head", choices=HEAD_KINDS, default=None,
-                    help=f"feed-forward scorer: head trained on frontiers of house maps or on room lists; "
-                         f"-bag: the same on a bag of objects, without the language model (default {DEFAULT_HEAD})")
-    ev.add_argument("--seg-noise", type=float, default=0.0, metavar="P",
-                    help="perception errors: per frame and category, miss / mislabel with probability P")
-    ev.add_argument("--sim", choices=BACKENDS, default=None,
-                    help="who moves and renders: builtin (default) or habitat (habitat-sim in --habitat-python, "
-                         "scans only: --dataset with --scenes); same as --set sim.backend=...")
-    ev.add_argument("--habitat-python", default=None, metavar="PATH",
-                    help="the python of the environment that has habitat-sim (`make habitat` builds one into "
-                         "~/.cache/l3mvn/habitat/python)")
+    ev.add_argument(
+        "--selection",
+        choices=SELECTIONS,
+        default="paper",
+        help="language policies: the paper's bound rule, the official code's thresholds, or expected "
+        "(least cost-utility metres + the frontier head's expected metres; needs --head "
+        "frontiers or frontiers-bag)",
+    )
+    ev.add_argument(
+        "--head",
+        choices=HEAD_KINDS,
+        default=None,
+        help=f"feed-forward scorer: head trained on frontiers of house maps or on room lists; "
+        f"-bag: the same on a bag of objects, without the language model (default {DEFAULT_HEAD})",
+    )
+    ev.add_argument(
+        "--seg-noise",
+        type=float,
+        default=0.0,
+        metavar="P",
+        help="perception errors: per frame and category, miss / mislabel with probability P",
+    )
+    ev.add_argument(
+        "--sim",
+        choices=BACKENDS,
+        default=None,
+        help="who moves and renders: builtin (default) or habitat (habitat-sim in --habitat-python, "
+        "scans only: --dataset with --scenes); same as --set sim.backend=...",
+    )
+    ev.add_argument(
+        "--habitat-python",
+        default=None,
+        metavar="PATH",
+        help="the python of the environment that has habitat-sim (`make habitat` builds one into "
+        "~/.cache/l3mvn/habitat/python)",
+    )
     ev.add_argument("--record", action="store_true", help="write a rerun recording per episode to --record-dir")
     ev.add_argument("--record-dir", default="recordings", help="where --record writes (default recordings/)")
-    ev.add_argument("--video", metavar="DIR", default=None,
-                    help="also write an MP4 per episode here, named by outcome (implies --record)")
+    ev.add_argument(
+        "--video",
+        metavar="DIR",
+        default=None,
+        help="also write an MP4 per episode here, named by outcome (implies --record)",
+    )
 
     sc = sub.add_parser("scenes", help="list the scenes and floors of a dataset split, or audit them")
-    sc.add_argument("action", nargs="?", choices=["list", "audit"], default="list",
-                    help="list (default), or audit: can every goal object be confirmed from its success region")
+    sc.add_argument(
+        "action",
+        nargs="?",
+        choices=["list", "audit"],
+        default="list",
+        help="list (default), or audit: can every goal object be confirmed from its success region",
+    )
     _add_source_args(sc)
     sc.add_argument("--rule", choices=SUCCESS_RULES, default="semexp", help="audit: success rule")
     sc.add_argument("--frame", default=None, metavar="HxW", help="audit: render size (default 480x640)")
-    sc.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
-                    help="audit: override a config field")
+    sc.add_argument(
+        "--set", action="append", default=[], metavar="SECTION.FIELD=VALUE", help="audit: override a config field"
+    )
     sc.add_argument("--scene", default=None, help="audit: only this scene")
     sc.add_argument("--workers", type=_positive, default=2, help="audit: floors audited in parallel (default 2)")
     sc.add_argument("--json", action="store_true", help="audit: print the JSON report instead of the table")
-    sc.add_argument("--out", default=None,
-                    help="audit: write audit.json and a diagnostic PNG per failing instance here")
+    sc.add_argument(
+        "--out", default=None, help="audit: write audit.json and a diagnostic PNG per failing instance here"
+    )
     sc.add_argument("--all-pngs", action="store_true", help="audit: a PNG for every instance, not only failing ones")
 
     epi = sub.add_parser("episodes", help="episode files")
@@ -189,15 +260,22 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     bs = lang_sub.add_parser("build-stats", help="recompute the shipped co-occurrence JSON from room data")
     bs.add_argument("--gibson-rooms", default=None, help="gibson_3dsg_rooms.jsonl (default: ../shared when present)")
     bs.add_argument("--out", default=None, help="where to write (default: the shipped file)")
-    fd = lang_sub.add_parser("frontier-data", help="frontiers an agent chose among on house maps, labelled with "
-                                                   "the ground-truth metres to every goal (for train-head)")
+    fd = lang_sub.add_parser(
+        "frontier-data",
+        help="frontiers an agent chose among on house maps, labelled with "
+        "the ground-truth metres to every goal (for train-head)",
+    )
     from l3mvn.run.eval.frontier_data import add_arguments as add_frontier_data_arguments
 
     add_frontier_data_arguments(fd)
     th = sub.add_parser("train-head", help="train the feed-forward language head (split by house or building)")
-    th.add_argument("--head", choices=HEAD_KINDS, default="frontiers",
-                    help="frontiers: on --data from `language frontier-data`; rooms: the paper's room lists; "
-                         "-bag: the same on a bag of objects, without the language model")
+    th.add_argument(
+        "--head",
+        choices=HEAD_KINDS,
+        default="frontiers",
+        help="frontiers: on --data from `language frontier-data`; rooms: the paper's room lists; "
+        "-bag: the same on a bag of objects, without the language model",
+    )
     th.add_argument("--data", nargs="+", default=None, help="--head frontiers: frontier-data file(s)")
     th.add_argument("--model", default="minilm", help="sentence embedder: minilm (shipped) or a HF name/path")
     th.add_argument("--out", default=None, help="where to save the head (default: the shipped file for minilm)")
@@ -214,8 +292,12 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     _add_sim_args(rd)
     rd.add_argument("--scene", default=None, help="scene name (default: the first)")
     rd.add_argument("--floor", type=int, default=0)
-    rd.add_argument("--pose", default=None, metavar="X,Y,HEADING_DEG",
-                    help="camera pose in metres/degrees (default: a random navigable pose)")
+    rd.add_argument(
+        "--pose",
+        default=None,
+        metavar="X,Y,HEADING_DEG",
+        help="camera pose in metres/degrees (default: a random navigable pose)",
+    )
     rd.add_argument("--out", default="frame.png")
     return parser
 
@@ -278,9 +360,18 @@ def _scenes(args: argparse.Namespace, cfg: Config | None = None):
 
 
 def _cmd_scenes(args: argparse.Namespace) -> int:
-    given = [flag for flag, value in (("--scene", args.scene), ("--frame", args.frame), ("--out", args.out),
-                                      ("--json", args.json), ("--all-pngs", args.all_pngs), ("--set", args.set))
-             if value]
+    given = [
+        flag
+        for flag, value in (
+            ("--scene", args.scene),
+            ("--frame", args.frame),
+            ("--out", args.out),
+            ("--json", args.json),
+            ("--all-pngs", args.all_pngs),
+            ("--set", args.set),
+        )
+        if value
+    ]
     if given:
         raise L3MVNError(f"{', '.join(given)}: only for 'l3mvn scenes audit'")
     source, scenes = _scenes(args)
@@ -318,12 +409,22 @@ def _cmd_audit(args: argparse.Namespace) -> int:
         source, split = args.dataset, args.split
         scenes, episodes = load_split_for_audit(args.dataset, args.split, args.scene)
     with _progress_floors(sum(len(f) for f in scenes.values())) as bar:
+
         def progress(floor) -> None:
             bar.update(1)
             bar.set_postfix_str(floor.key)
 
-        report = audit_scenes(scenes, cfg, episodes, workers=args.workers, out_dir=args.out,
-                              all_pngs=args.all_pngs, source=source, split=split, progress=progress)
+        report = audit_scenes(
+            scenes,
+            cfg,
+            episodes,
+            workers=args.workers,
+            out_dir=args.out,
+            all_pngs=args.all_pngs,
+            source=source,
+            split=split,
+            progress=progress,
+        )
     data = report.to_json()
     if args.out:
         path = write_file(Path(args.out) / "audit.json", json.dumps(data, indent=1), "the audit report")
@@ -339,9 +440,9 @@ def _progress_floors(total: int):
 
 
 def _cmd_generate(args: argparse.Namespace) -> int:
+    from l3mvn.core.paths import plain_name
     from l3mvn.world.episode import Episode
     from l3mvn.world.episodes import episode_file, generate_episodes, write_episode_file
-    from l3mvn.core.paths import plain_name
     from l3mvn.world.scenes.semexp import info_path, save_split, to_semexp_channels
 
     plain_name(args.split, "--split", "val")  # a folder under --out: it must not climb out of it
@@ -362,9 +463,15 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     total = 0
     for name in sorted(scenes):
         episodes: list[Episode] = []
-        for floor, scene in sorted(scenes[name].items()):
-            episodes += generate_episodes(scene, args.per_scene, seed=args.seed, first_id=len(episodes),
-                                          min_distance_m=args.min_distance, max_distance_m=args.max_distance)
+        for _, scene in sorted(scenes[name].items()):
+            episodes += generate_episodes(
+                scene,
+                args.per_scene,
+                seed=args.seed,
+                first_id=len(episodes),
+                min_distance_m=args.min_distance,
+                max_distance_m=args.max_distance,
+            )
         write_episode_file(episode_file(out, args.split, name), episodes, scenes[name])
         total += len(episodes)
     print(f"wrote {total} episodes for {len(scenes)} scenes to {split_out / 'content'}")
@@ -388,15 +495,26 @@ def _cmd_eval(args: argparse.Namespace) -> int:
 
         if args.scorer not in scorer_names():
             raise L3MVNError(f"unknown scorer {args.scorer!r}; valid scorers: {', '.join(scorer_names())}")
-    cfg = _config(args, PolicyConfig(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise,
-                                     head=args.head))
+    cfg = _config(
+        args, PolicyConfig(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise, head=args.head)
+    )
     if cfg.sim.backend == "habitat" and args.scenes is None:
-        raise L3MVNError("--sim habitat runs scans: give --dataset with a habitat ObjectNav dataset and --scenes "
-                         "with its scan root (`l3mvn export-hm3d` writes one from a procedural house)")
+        raise L3MVNError(
+            "--sim habitat runs scans: give --dataset with a habitat ObjectNav dataset and --scenes "
+            "with its scan root (`l3mvn export-hm3d` writes one from a procedural house)"
+        )
     check_resumable(args.out, args.resume)
-    job = EvalJob.create(args.dataset, args.split, houses=args.houses, episodes_per_house=args.episodes_per_house,
-                         seed=args.seed, config=cfg, policy=args.policy,
-                         record_dir=args.record_dir if args.record or args.video else None, scenes=args.scenes)
+    job = EvalJob.create(
+        args.dataset,
+        args.split,
+        houses=args.houses,
+        episodes_per_house=args.episodes_per_house,
+        seed=args.seed,
+        config=cfg,
+        policy=args.policy,
+        record_dir=args.record_dir if args.record or args.video else None,
+        scenes=args.scenes,
+    )
     eset = job.load()
     if cfg.task.success_rule in VIEW_POINT_RULES:
         from l3mvn.world.datasets.objectnav import geodesic_report
@@ -405,18 +523,32 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     episodes = eset.episodes[: args.episodes] if args.episodes else eset.episodes
     if args.video:
         make_folder(args.video, "--video")
-    run = evaluate(job, episodes, out=args.out, resume=args.resume, backend=args.backend, workers=args.workers,
-                   address=args.address, video_dir=args.video, stream=sys.stderr)
+    run = evaluate(
+        job,
+        episodes,
+        out=args.out,
+        resume=args.resume,
+        backend=args.backend,
+        workers=args.workers,
+        address=args.address,
+        video_dir=args.video,
+        stream=sys.stderr,
+    )
     if run.errors:
-        print(f"{run.errors} episodes failed (error rows in {args.out or 'the log above'}; --resume retries them)",
-              file=sys.stderr)
+        print(
+            f"{run.errors} episodes failed (error rows in {args.out or 'the log above'}; --resume retries them)",
+            file=sys.stderr,
+        )
     if not run.rows:
         if run.interrupted:
             raise KeyboardInterrupt
         raise L3MVNError("no episodes were run")
     if run.interrupted:
-        print(f"interrupted: summary of the {len(run.rows)} of {len(episodes)} episodes finished "
-              f"(saved in {args.out or 'no file: add --out'}; --resume runs the rest)", file=sys.stderr)
+        print(
+            f"interrupted: summary of the {len(run.rows)} of {len(episodes)} episodes finished "
+            f"(saved in {args.out or 'no file: add --out'}; --resume runs the rest)",
+            file=sys.stderr,
+        )
     summary = summarize(list(run.rows.values()))
     summary["dataset"] = {"name": eset.name, "split": eset.split, "format": eset.format}
     print(f"dataset: {eset.name}/{eset.split}, format {eset.format}")
@@ -424,8 +556,10 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(json_safe(summary), sort_keys=True))
     if run.unwritten and not run.interrupted:
-        raise L3MVNError(f"{len(run.unwritten)} recordings or videos were not written whole, the results are kept "
-                         f"(first: {run.unwritten[0]})")
+        raise L3MVNError(
+            f"{len(run.unwritten)} recordings or videos were not written whole, the results are kept "
+            f"(first: {run.unwritten[0]})"
+        )
     return 130 if run.interrupted else 0
 
 
@@ -450,8 +584,15 @@ def _cmd_language(args: argparse.Namespace) -> int:
 def _cmd_train_head(args: argparse.Namespace) -> int:
     from l3mvn.agent.language import train_any_head
 
-    metrics = train_any_head(args.head, data=args.data, model=args.model, out=args.out,
-                             gibson_rooms=args.gibson_rooms, epochs=args.epochs, seed=args.seed)
+    metrics = train_any_head(
+        args.head,
+        data=args.data,
+        model=args.model,
+        out=args.out,
+        gibson_rooms=args.gibson_rooms,
+        epochs=args.epochs,
+        seed=args.seed,
+    )
     print(json.dumps(metrics, indent=2, sort_keys=True, default=str))
     return 0
 
@@ -480,13 +621,13 @@ def _cmd_render(args: argparse.Namespace) -> int:
     import numpy as np
     from PIL import Image
 
+    from l3mvn.core.types import Pose, wrap_angle
+    from l3mvn.core.writing import write_file
+    from l3mvn.run.viz import colorize_depth, colorize_semantic, side_by_side
     from l3mvn.world.scenes.semexp import pick_floor
     from l3mvn.world.sim.render import Renderer
     from l3mvn.world.sim.simulator import random_walkable_pose
-    from l3mvn.core.types import Pose, wrap_angle
     from l3mvn.world.sim.world import build_world
-    from l3mvn.run.viz import colorize_depth, colorize_semantic, side_by_side
-    from l3mvn.core.writing import write_file
 
     def writes_rgb(fmt: str) -> bool:
         """Whether PIL can encode our RGB panel as ``fmt`` (XBM, MSP, ... cannot; tried on one pixel)."""
@@ -526,12 +667,15 @@ def _cmd_render(args: argparse.Namespace) -> int:
         if not all(math.isfinite(v) for v in (x, y, h)):
             raise L3MVNError(f"--pose needs finite numbers, got {text!r}")
         if not scene.contains(x, y):
-            raise L3MVNError(f"--pose {x:g},{y:g} lies outside the map of {scene.key}, "
-                             f"which spans {scene.extent_text()}")
+            raise L3MVNError(
+                f"--pose {x:g},{y:g} lies outside the map of {scene.key}, which spans {scene.extent_text()}"
+            )
         r, c = scene.cell_of(x, y)
         if world.walls[r, c] or world.furniture[r, c] or scene.object_any[r, c]:
-            raise L3MVNError(f"--pose {x:g},{y:g} is off the floor of {scene.key}: cell ({r}, {c}) is a wall, "
-                             "furniture or an object; omit --pose for a random navigable pose")
+            raise L3MVNError(
+                f"--pose {x:g},{y:g} is off the floor of {scene.key}: cell ({r}, {c}) is a wall, "
+                "furniture or an object; omit --pose for a random navigable pose"
+            )
         return Pose(x, y, wrap_angle(math.radians(h)))
 
     cfg = _config(args).sim
@@ -548,16 +692,18 @@ def _cmd_render(args: argparse.Namespace) -> int:
     else:
         pose = random_walkable_pose(scene, np.random.default_rng(args.seed))
     frame = Renderer(world, cfg).render(pose, 0.0)
-    panel = side_by_side(frame.rgb, colorize_depth(frame.depth, cfg.max_depth_m),
-                         colorize_semantic(frame.semantic, scene.categories))
+    panel = side_by_side(
+        frame.rgb, colorize_depth(frame.depth, cfg.max_depth_m), colorize_semantic(frame.semantic, scene.categories)
+    )
     encoded = io.BytesIO()
     try:
         Image.fromarray(panel).save(encoded, format=fmt)
     except (OSError, ValueError) as exc:
         raise L3MVNError(f"--out {args.out}: cannot encode the image as {fmt} ({exc}); use .png") from None
     write_file(out, encoded.getvalue(), "--out")
-    print(f"wrote {args.out}: {scene.key} at x={pose.x:.2f} y={pose.y:.2f} "
-          f"heading={math.degrees(pose.heading):.0f} deg")
+    print(
+        f"wrote {args.out}: {scene.key} at x={pose.x:.2f} y={pose.y:.2f} heading={math.degrees(pose.heading):.0f} deg"
+    )
     return 0
 
 

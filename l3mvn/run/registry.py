@@ -88,17 +88,26 @@ def _map_agent(global_policy: Callable[[PolicyContext], GlobalPolicy]) -> Callab
 def _language(name: str, language: Language) -> Callable[[PolicyContext], Policy]:
     def policy(ctx: PolicyContext) -> GlobalPolicy:
         p = ctx.config.policy
-        return LanguageFrontierPolicy(name, p.scorer or language.scorer, language.exploration, p.selection,
-                                      language.paradigm, (p.bound_low, p.bound_high), p.head,
-                                      ctx.config.frontiers.cu_lambda)
+        return LanguageFrontierPolicy(
+            name,
+            p.scorer or language.scorer,
+            language.exploration,
+            p.selection,
+            language.paradigm,
+            (p.bound_low, p.bound_high),
+            p.head,
+            ctx.config.frontiers.cu_lambda,
+        )
 
     return _map_agent(policy)
 
 
 def _oracle(ctx: PolicyContext) -> Policy:
     if not isinstance(ctx.env, MotionModel):
-        raise L3MVNError(f"policy 'oracle' plans on the environment's motion model, and a {type(ctx.env).__name__} "
-                         "has none (forward_result): run it on the built-in simulator or the habitat bridge")
+        raise L3MVNError(
+            f"policy 'oracle' plans on the environment's motion model, and a {type(ctx.env).__name__} "
+            "has none (forward_result): run it on the built-in simulator or the habitat bridge"
+        )
     assert ctx.task is not None
     return OraclePolicy(ctx.env, ctx.task)
 
@@ -118,29 +127,67 @@ _FEED_FORWARD = Language("feedforward", "cost-utility", "feedforward")
 _NEAR_FEED_FORWARD = Language("feedforward", "nearest", "feedforward")
 
 BUILT_IN: tuple[PolicySpec, ...] = (
-    PolicySpec("oracle", _oracle, "ground-truth shortest path: a check of the simulator and the metrics",
-               map_based=False, ground_truth=True),
-    PolicySpec("random-walk", lambda ctx: RandomWalkPolicy(ctx.seed), "uniformly random actions (the paper's baseline)",
-               map_based=False),
+    PolicySpec(
+        "oracle",
+        _oracle,
+        "ground-truth shortest path: a check of the simulator and the metrics",
+        map_based=False,
+        ground_truth=True,
+    ),
+    PolicySpec(
+        "random-walk",
+        lambda ctx: RandomWalkPolicy(ctx.seed),
+        "uniformly random actions (the paper's baseline)",
+        map_based=False,
+    ),
     PolicySpec("frontier", _map_agent(lambda ctx: NearestFrontier()), "the nearest frontier (Yamauchi)"),
-    PolicySpec("cost-utility", _map_agent(lambda ctx: CostUtility()),
-               "the frontier with the best size for its distance (the paper's Exp)"),
-    PolicySpec("random-sample", _map_agent(lambda ctx: RandomSample(ctx.config.planner.obstacle_dilation_cells)),
-               "a random unexplored cell of the local map"),
-    PolicySpec("oracle-frontier", _map_agent(_oracle_frontier),
-               "the frontier nearest the goal by the ground truth: the ceiling for any frontier prior",
-               ground_truth=True),
-    PolicySpec("l3mvn-zs", _language("l3mvn-zs", _ZERO_SHOT),
-               "zero-shot language scores fused with cost-utility (the paper's L3MVN-ZS)", language=_ZERO_SHOT),
-    PolicySpec("l3mvn-ff", _language("l3mvn-ff", _FEED_FORWARD),
-               "the feed-forward head's scores fused with cost-utility (the paper's L3MVN-FF)", language=_FEED_FORWARD),
-    PolicySpec("near+llm", _language("near+llm", _NEAR_FEED_FORWARD),
-               "the feed-forward head's scores fused with the nearest frontier (the paper's Table II)",
-               language=_NEAR_FEED_FORWARD),
-    PolicySpec("exp", _map_agent(lambda ctx: CostUtility()), "= cost-utility (the paper's Table II name)",
-               same_as="cost-utility"),
-    PolicySpec("exp+llm", _language("l3mvn-ff", _FEED_FORWARD), "= l3mvn-ff (the paper's Table II name)",
-               language=_FEED_FORWARD, same_as="l3mvn-ff"),
+    PolicySpec(
+        "cost-utility",
+        _map_agent(lambda ctx: CostUtility()),
+        "the frontier with the best size for its distance (the paper's Exp)",
+    ),
+    PolicySpec(
+        "random-sample",
+        _map_agent(lambda ctx: RandomSample(ctx.config.planner.obstacle_dilation_cells)),
+        "a random unexplored cell of the local map",
+    ),
+    PolicySpec(
+        "oracle-frontier",
+        _map_agent(_oracle_frontier),
+        "the frontier nearest the goal by the ground truth: the ceiling for any frontier prior",
+        ground_truth=True,
+    ),
+    PolicySpec(
+        "l3mvn-zs",
+        _language("l3mvn-zs", _ZERO_SHOT),
+        "zero-shot language scores fused with cost-utility (the paper's L3MVN-ZS)",
+        language=_ZERO_SHOT,
+    ),
+    PolicySpec(
+        "l3mvn-ff",
+        _language("l3mvn-ff", _FEED_FORWARD),
+        "the feed-forward head's scores fused with cost-utility (the paper's L3MVN-FF)",
+        language=_FEED_FORWARD,
+    ),
+    PolicySpec(
+        "near+llm",
+        _language("near+llm", _NEAR_FEED_FORWARD),
+        "the feed-forward head's scores fused with the nearest frontier (the paper's Table II)",
+        language=_NEAR_FEED_FORWARD,
+    ),
+    PolicySpec(
+        "exp",
+        _map_agent(lambda ctx: CostUtility()),
+        "= cost-utility (the paper's Table II name)",
+        same_as="cost-utility",
+    ),
+    PolicySpec(
+        "exp+llm",
+        _language("l3mvn-ff", _FEED_FORWARD),
+        "= l3mvn-ff (the paper's Table II name)",
+        language=_FEED_FORWARD,
+        same_as="l3mvn-ff",
+    ),
     PolicySpec(TELEOP, _teleop, "the map-based agent driven by hand in the dashboard", driven=True),
 )
 
@@ -168,8 +215,9 @@ def policies() -> dict[str, PolicySpec]:
 
 def policy_names(*, driven: bool = True, same: bool = True) -> tuple[str, ...]:
     """Policy names; ``driven=False`` leaves out those a person drives, ``same=False`` the other names."""
-    return tuple(name for name, spec in _registry()[0].items()
-                 if (driven or not spec.driven) and (same or spec.same_as is None))
+    return tuple(
+        name for name, spec in _registry()[0].items() if (driven or not spec.driven) and (same or spec.same_as is None)
+    )
 
 
 def policy_spec(name: str) -> PolicySpec:
@@ -232,6 +280,6 @@ def make_policy(name: str, env: Environment, task: ObjectNavTask, config: Config
     check_options(name, config.policy)
     spec = policy_spec(name)
     world = spec.ground_truth
-    return spec.build(PolicyContext(tuple(env.categories), config, seed,
-                                    env=env if world else None, task=task if world else None))
-
+    return spec.build(
+        PolicyContext(tuple(env.categories), config, seed, env=env if world else None, task=task if world else None)
+    )

@@ -14,11 +14,11 @@ from dataclasses import dataclass, field
 from l3mvn.core.config import Config
 from l3mvn.run.events import EventBus
 from l3mvn.run.registry import check_options, make_policy
-from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.run.session import EpisodeSession
+from l3mvn.world.episode import Episode
+from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.sim.base import Environment
 from l3mvn.world.sim.simulator import BuiltinSimulator
-from l3mvn.world.episode import Episode
 from l3mvn.world.task import EpisodeResult, ObjectNavTask
 
 # Floors kept warm: eval workers take episodes in dataset order, so a handful covers what
@@ -38,8 +38,7 @@ class Floor:
 class Runner:
     """Sessions on warm floors for any policy, under one config tree."""
 
-    def __init__(self, config: Config, *, seed: int = 0, config_hash: str = "",
-                 warm_floors: int = WARM_FLOORS) -> None:
+    def __init__(self, config: Config, *, seed: int = 0, config_hash: str = "", warm_floors: int = WARM_FLOORS) -> None:
         self.config, self.seed, self.config_hash = config, seed, config_hash
         # A habitat floor is a server process holding a whole scan: one at a time.
         self.warm_floors = 1 if config.sim.backend == "habitat" else warm_floors
@@ -68,13 +67,20 @@ class Runner:
             floor.policies[name] = make_policy(name, floor.env, floor.task, self.config, self.seed)
         return floor.policies[name]
 
-    def session(self, scene: SceneMap, policy: str, bus: EventBus | None = None, *,
-                config_hash: str | None = None) -> EpisodeSession:
+    def session(
+        self, scene: SceneMap, policy: str, bus: EventBus | None = None, *, config_hash: str | None = None
+    ) -> EpisodeSession:
         """A session of ``policy`` on ``scene``'s floor, not yet started; ``config_hash`` overrides
         the runner's for a session whose settings differ (the dashboard's scorer choice)."""
         floor, agent = self.floor(scene), self.policy(scene, policy)
-        return EpisodeSession(floor.env, floor.task, agent, policy_name=policy, bus=bus,
-                              config_hash=self.config_hash if config_hash is None else config_hash)
+        return EpisodeSession(
+            floor.env,
+            floor.task,
+            agent,
+            policy_name=policy,
+            bus=bus,
+            config_hash=self.config_hash if config_hash is None else config_hash,
+        )
 
     def run(self, scene: SceneMap, episode: Episode, policy: str, bus: EventBus | None = None) -> EpisodeResult:
         """Run one episode to the end and return its scored result."""

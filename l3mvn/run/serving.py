@@ -67,10 +67,10 @@ def bind_failure(host: str, port: int, exc: BaseException) -> str:
         return f"--port must lie in 1..65535, got {port}"
     code = getattr(exc, "errno", None)
     if code == errno.EADDRINUSE:
-        free = next((p for p in range(port + 1, min(port + 1 + _PORT_HINTS, 65536)) if not _cannot_bind(host, p)),
-                    None)
-        return (f"port {port} is in use on {host}; pick another with --port N"
-                + (f" (--port {free} is free)" if free else ""))
+        free = next((p for p in range(port + 1, min(port + 1 + _PORT_HINTS, 65536)) if not _cannot_bind(host, p)), None)
+        return f"port {port} is in use on {host}; pick another with --port N" + (
+            f" (--port {free} is free)" if free else ""
+        )
     if code == errno.EADDRNOTAVAIL:
         return f"--host {host} is not an address of this machine; give one of its own, or 0.0.0.0 for all"
     if code == errno.EACCES:

@@ -9,16 +9,15 @@ apart, as agent diagnostics, and never decides a failure cause.
 from __future__ import annotations
 
 import time
-from dataclasses import replace
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol, runtime_checkable
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.decision import Decision
-from l3mvn.run.events import EventBus, StepEvent
-from l3mvn.world.sim.base import Environment
+from l3mvn.core.errors import L3MVNError
 from l3mvn.core.types import Action, EpisodeBrief, Observation
+from l3mvn.run.events import EventBus, StepEvent
 from l3mvn.world.episode import Episode
+from l3mvn.world.sim.base import Environment
 from l3mvn.world.task import EpisodeMeasures, EpisodeOutcome, EpisodeResult, ObjectNavTask, score_episode
 
 
@@ -52,8 +51,16 @@ class EpisodeSession:
     """Drives one episode. Policies return an Action or a Decision (map-based agents explain
     themselves); every step is published on ``bus`` as a StepEvent. ``task`` judges it."""
 
-    def __init__(self, env: Environment, task: ObjectNavTask, policy: Policy, *, policy_name: str, config_hash: str,
-                 bus: EventBus | None = None) -> None:
+    def __init__(
+        self,
+        env: Environment,
+        task: ObjectNavTask,
+        policy: Policy,
+        *,
+        policy_name: str,
+        config_hash: str,
+        bus: EventBus | None = None,
+    ) -> None:
         self.env, self.task, self.policy = env, task, policy
         self.policy_name, self.config_hash = policy_name, config_hash
         self.bus = bus or EventBus()
@@ -166,9 +173,16 @@ class EpisodeSession:
     def _publish(self, obs: Observation, decision: Decision | None, action: Action | None) -> StepEvent:
         assert self.episode is not None
         event = StepEvent(
-            episode_key=self.episode.key, segment=self.segment, step=obs.step, goal=self.episode.goal,
-            pose=obs.pose, observation=obs, decision=decision, action=action,
-            ground_truth=self._ground_truth(), done=self.env.done,
+            episode_key=self.episode.key,
+            segment=self.segment,
+            step=obs.step,
+            goal=self.episode.goal,
+            pose=obs.pose,
+            observation=obs,
+            decision=decision,
+            action=action,
+            ground_truth=self._ground_truth(),
+            done=self.env.done,
             result=self._result.to_json() if self._result else None,
         )
         self.last_event = event
@@ -181,10 +195,22 @@ class EpisodeSession:
         outcome = self.measures.outcome()
         success, spl, dtg, cause = score_episode(outcome, self.task.cfg.task)
         return EpisodeResult(
-            key=ep.key, scene=ep.scene, floor=ep.floor, episode_id=ep.episode_id, goal=ep.goal,
-            policy=self.policy_name, success=success, spl=spl, dtg=dtg, failure=cause, steps=env.steps,
-            path_length_m=env.path_length_m, shortest_path_m=outcome.shortest_path_m, rule=self.task.rule,
-            config_hash=self.config_hash, seconds=time.perf_counter() - self._t0,
+            key=ep.key,
+            scene=ep.scene,
+            floor=ep.floor,
+            episode_id=ep.episode_id,
+            goal=ep.goal,
+            policy=self.policy_name,
+            success=success,
+            spl=spl,
+            dtg=dtg,
+            failure=cause,
+            steps=env.steps,
+            path_length_m=env.path_length_m,
+            shortest_path_m=outcome.shortest_path_m,
+            rule=self.task.rule,
+            config_hash=self.config_hash,
+            seconds=time.perf_counter() - self._t0,
             extra=self._extra(outcome),
         )
 

@@ -15,8 +15,8 @@ import zlib
 import numpy as np
 from scipy import ndimage as ndi
 
-from l3mvn.world.sim.base import MotionModel
 from l3mvn.core.types import Action, EpisodeBrief, Observation, Pose, wrap_angle
+from l3mvn.world.sim.base import MotionModel
 from l3mvn.world.task import GoalRegion, ObjectNavTask, geodesic_field
 
 _NEIGHBOURS = np.array([(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)])
@@ -101,15 +101,19 @@ class OraclePolicy:
         def key(pose: Pose, k: int) -> tuple[int, int, int]:
             return (*scene.cell_of(pose.x, pose.y), k % n)
 
-        came: dict[tuple[int, int, int], tuple[tuple[int, int, int] | None, Action | None]] = {key(start, 0): (None, None)}
+        came: dict[tuple[int, int, int], tuple[tuple[int, int, int] | None, Action | None]] = {
+            key(start, 0): (None, None)
+        }
         layer = [(start, 0)]
         while layer and len(came) < self.search_states:
             following = []
             for pose, k in layer:
                 here = key(pose, k)
-                moves = ((Action.MOVE_FORWARD, self.env.forward_result(pose)[0], k),
-                         (Action.TURN_LEFT, Pose(pose.x, pose.y, pose.heading + turn), k + 1),
-                         (Action.TURN_RIGHT, Pose(pose.x, pose.y, pose.heading - turn), k - 1))
+                moves = (
+                    (Action.MOVE_FORWARD, self.env.forward_result(pose)[0], k),
+                    (Action.TURN_LEFT, Pose(pose.x, pose.y, pose.heading + turn), k + 1),
+                    (Action.TURN_RIGHT, Pose(pose.x, pose.y, pose.heading - turn), k - 1),
+                )
                 for action, nxt, j in moves:
                     state = key(nxt, j)
                     if state in came or math.dist(state[:2], origin) > reach:
@@ -164,16 +168,17 @@ def object_distances(task: ObjectNavTask, goal: str) -> GoalRegion:
     sources = np.zeros_like(trav)
     for box_id, box in enumerate(ndi.find_objects(labels), start=1):
         pad = last + 1
-        window = (slice(max(box[0].start - pad, 0), box[0].stop + pad),
-                  slice(max(box[1].start - pad, 0), box[1].stop + pad))
+        window = (
+            slice(max(box[0].start - pad, 0), box[0].stop + pad),
+            slice(max(box[1].start - pad, 0), box[1].stop + pad),
+        )
         near = ndi.distance_transform_edt(labels[window] != box_id)
         floor = trav[window]
         reach = near[floor]
         if reach.size and reach.min() <= last:
             sources[window] |= floor & (near <= max(first, float(reach.min())))
     field = geodesic_field(trav, sources, res)
-    return GoalRegion(goal=goal, rule="object", region=sources, distance_m=field, length_offset_m=0.0,
-                      resolution_m=res)
+    return GoalRegion(goal=goal, rule="object", region=sources, distance_m=field, length_offset_m=0.0, resolution_m=res)
 
 
 class ObjectDistances:

@@ -18,14 +18,14 @@ from typing import TypeGuard
 import numpy as np
 from scipy import ndimage as ndi
 
+from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.config import Config
 from l3mvn.core.errors import L3MVNError
-from l3mvn.world.task.regions import goal_region
-from l3mvn.core.categories import GOAL_CATEGORIES
-from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.core.types import Pose
-from l3mvn.world.episode import Episode
 from l3mvn.core.writing import write_file
+from l3mvn.world.episode import Episode
+from l3mvn.world.scenes.scene import SceneMap
+from l3mvn.world.task.regions import goal_region
 
 
 def episode_file(dataset: str | Path, split: str, scene: str) -> Path:
@@ -59,7 +59,7 @@ def _read_records(path: Path) -> list:
     data = read_json_gz(path)
     records = data.get("episodes") if isinstance(data, dict) else None
     if not isinstance(records, list):
-        raise L3MVNError(f"{path}: expected {{\"episodes\": [...]}}")
+        raise L3MVNError(f'{path}: expected {{"episodes": [...]}}')
     return records
 
 
@@ -85,8 +85,10 @@ def _check_unique_ids(path: Path, episodes: list[Episode]) -> None:
     for index, ep in enumerate(episodes):
         earlier = first.setdefault(ep.episode_id, index)
         if earlier != index:
-            raise L3MVNError(f"{path}: episodes #{earlier} and #{index} both have episode_id {ep.episode_id}; "
-                             "ids must be unique within a scene file")
+            raise L3MVNError(
+                f"{path}: episodes #{earlier} and #{index} both have episode_id {ep.episode_id}; "
+                "ids must be unique within a scene file"
+            )
 
 
 def read_episodes(dataset: str | Path, split: str, scenes: dict[str, dict[int, SceneMap]]) -> list[Episode]:
@@ -94,7 +96,8 @@ def read_episodes(dataset: str | Path, split: str, scenes: dict[str, dict[int, S
     content = Path(dataset) / split / "content"
     if not content.is_dir():
         raise L3MVNError(
-            f"{content} does not exist: generate episodes with 'l3mvn episodes generate --dataset {dataset} --split {split} --out DIR'"
+            f"{content} does not exist: generate episodes with "
+            f"'l3mvn episodes generate --dataset {dataset} --split {split} --out DIR'"
         )
     known = {p.name[: -len("_episodes.json.gz")] for p in content.glob("*_episodes.json.gz")}
     unknown = sorted(known - set(scenes))
@@ -123,8 +126,11 @@ def _episode_from_record(path: Path, index: int, rec: object, floors: dict[int, 
     if not isinstance(goal, str) or goal not in GOAL_CATEGORIES:
         raise L3MVNError(f"{where}: unknown category {_show(goal)}; valid: {', '.join(GOAL_CATEGORIES)}")
     return Episode(
-        episode_id=episode_id, scene=scene.name, floor=scene.floor,
-        start=_start_pose(where, scene, rec["start_position"], rec["start_rotation"]), goal=goal,
+        episode_id=episode_id,
+        scene=scene.name,
+        floor=scene.floor,
+        start=_start_pose(where, scene, rec["start_position"], rec["start_rotation"]),
+        goal=goal,
         object_id=_whole_number(where, "object_id", rec.get("object_id", -1), -1, _ID_LIMIT),
         geodesic_distance_m=_geodesic(where, rec.get("info")),
     )
@@ -144,8 +150,9 @@ def _check_scene_id(where: str, path: Path, rec: dict, scene: SceneMap) -> None:
     """``scene_id`` (a path such as ``gibson_semantic/X.glb``) must name the scene the file is for."""
     scene_id = rec.get("scene_id", path.name[: -len("_episodes.json.gz")])
     if not isinstance(scene_id, str):
-        raise L3MVNError(f"{where}: scene_id must be a string such as 'gibson_semantic/{scene.name}.glb', "
-                         f"got {_show(scene_id)}")
+        raise L3MVNError(
+            f"{where}: scene_id must be a string such as 'gibson_semantic/{scene.name}.glb', got {_show(scene_id)}"
+        )
     name = Path(scene_id).name.split(".")[0]
     if name != scene.name:
         raise L3MVNError(f"{where}: scene_id names {name!r} but the file is for {scene.name!r}")
@@ -160,8 +167,10 @@ def _start_pose(where: str, scene: SceneMap, position: object, rotation: object)
     except L3MVNError as exc:
         raise L3MVNError(f"{where}: {exc}") from None
     if not scene.contains(start.x, start.y):
-        raise L3MVNError(f"{where}: start_position {_show(position)} lies outside the map of {scene.key}, "
-                         f"which spans {scene.extent_text()}")
+        raise L3MVNError(
+            f"{where}: start_position {_show(position)} lies outside the map of {scene.key}, "
+            f"which spans {scene.extent_text()}"
+        )
     r, c = scene.cell_of(start.x, start.y)
     if not scene.navigable[r, c]:
         raise L3MVNError(f"{where}: start cell ({r}, {c}) is off the navigable area")
@@ -175,16 +184,19 @@ def yaw_quaternion(where: str, value: object, order: str = "wxyz") -> list[float
     quat = _finite_numbers(where, "start_rotation", value, 4, shown)
     norm = math.sqrt(sum(v * v for v in quat))
     if not abs(norm - 1.0) <= ROTATION_NORM_TOLERANCE:
-        raise L3MVNError(f"{where}: start_rotation {_show(value)} must be a unit quaternion {shown}; "
-                         f"its norm is {norm:.3g}")
+        raise L3MVNError(
+            f"{where}: start_rotation {_show(value)} must be a unit quaternion {shown}; its norm is {norm:.3g}"
+        )
     quat = [v / norm for v in quat]
     w, x, y, z = quat if order == "wxyz" else quat[3:] + quat[:3]
     if max(abs(x), abs(z)) > ROTATION_TILT_TOLERANCE:
         about_up = "w, 0, y, 0" if order == "wxyz" else "0, y, 0, w"
         hint = "; is the file in (x, y, z, w) order?" if order == "wxyz" else ""
         whose = "" if order == "wxyz" else "habitat's "
-        raise L3MVNError(f"{where}: start_rotation {_show(value)} must be a rotation about the up axis "
-                         f"({about_up} in {whose}{shown} order){hint}")
+        raise L3MVNError(
+            f"{where}: start_rotation {_show(value)} must be a rotation about the up axis "
+            f"({about_up} in {whose}{shown} order){hint}"
+        )
     return [w, x, y, z]
 
 
@@ -252,9 +264,13 @@ def _show(value: object) -> str:
 def episode_record(ep: Episode, scene: SceneMap) -> dict:
     position, rotation = scene.pose_to_habitat(ep.start)
     return {
-        "episode_id": ep.episode_id, "scene_id": f"gibson_semantic/{ep.scene}.glb",
-        "start_position": position, "start_rotation": rotation, "object_category": ep.goal,
-        "object_id": ep.object_id, "floor_id": ep.floor,
+        "episode_id": ep.episode_id,
+        "scene_id": f"gibson_semantic/{ep.scene}.glb",
+        "start_position": position,
+        "start_rotation": rotation,
+        "object_category": ep.goal,
+        "object_id": ep.object_id,
+        "floor_id": ep.floor,
         "info": {"geodesic_distance": ep.geodesic_distance_m},
     }
 
@@ -307,10 +323,17 @@ def generate_episodes(
         r, c = (int(v) for v in cells[k])
         x, y = scene.cell_center(r, c)
         heading = float(rng.uniform(-math.pi, math.pi))
-        episodes.append(Episode(
-            episode_id=first_id + i, scene=scene.name, floor=scene.floor, start=Pose(x, y, heading), goal=goal,
-            object_id=_nearest_instance(labels, r, c), geodesic_distance_m=round(float(dists[k]), 3),
-        ))
+        episodes.append(
+            Episode(
+                episode_id=first_id + i,
+                scene=scene.name,
+                floor=scene.floor,
+                start=Pose(x, y, heading),
+                goal=goal,
+                object_id=_nearest_instance(labels, r, c),
+                geodesic_distance_m=round(float(dists[k]), 3),
+            )
+        )
     return episodes
 
 
@@ -321,8 +344,10 @@ def _check_generation(count: int, seed: int, min_distance_m: float, max_distance
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
         raise L3MVNError(f"seed must be a whole number >= 0, got {seed!r}")
     if not (math.isfinite(min_distance_m) and math.isfinite(max_distance_m) and 0 <= min_distance_m <= max_distance_m):
-        raise L3MVNError(f"geodesic start distances need 0 <= min <= max, both finite (metres); "
-                         f"got min {min_distance_m}, max {max_distance_m}")
+        raise L3MVNError(
+            f"geodesic start distances need 0 <= min <= max, both finite (metres); "
+            f"got min {min_distance_m}, max {max_distance_m}"
+        )
 
 
 def _nearest_instance(labels: np.ndarray, r: int, c: int) -> int:

@@ -36,10 +36,10 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from l3mvn.core.errors import L3MVNError
-from l3mvn.core.config import FrontierConfig
-from l3mvn.core.types import wrap_angle
 from l3mvn.agent.frontiers.types import Frontier
+from l3mvn.core.config import FrontierConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.core.types import wrap_angle
 
 _NEIGHBOURS = np.array([(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)], dtype=np.int64)
 
@@ -62,10 +62,10 @@ def extract_frontiers(
 
     explored, obstacle: bool (H, W); agent_cell: (row, col); distance_m: float (H, W) geodesic
     distance from the agent, inf where unreachable; category_maps: bool (K, H, W) named by
-    ``category_names``; resolution_m: the map's cell size (the objects window is in metres). blocked: (N, 2) cells the caller is done with (reached or unreachable
-    goals); a cluster whose candidate lies within ``blocked_radius_cells`` of one (a radius, or one
-    per blocked cell) is dropped before the far limit, so frontiers beyond it stay eligible once the
-    near ones are used up.
+    ``category_names``; resolution_m: the map's cell size (the objects window is in metres).
+    blocked: (N, 2) cells the caller is done with (reached or unreachable goals); a cluster whose
+    candidate lies within ``blocked_radius_cells`` of one (a radius, or one per blocked cell) is
+    dropped before the far limit, so frontiers beyond it stay eligible once the near ones are used up.
     agent_heading (radians): with ``cfg.turn_cost_m_per_rad`` > 0, a frontier's cost C is its
     geodesic distance plus the turning needed to face it, so a frontier straight ahead beats an
     equally near one behind (turns spend the step budget as forward moves do).
@@ -103,8 +103,9 @@ def extract_frontiers(
     if blocked is not None:
         gap = np.hypot(centers[:, None, 0] - blocked[None, :, 0], centers[:, None, 1] - blocked[None, :, 1])
         if radius.ndim and radius.shape != (len(blocked),):
-            raise L3MVNError(f"blocked_radius_cells: one radius per blocked cell, got {radius.shape[0]} "
-                             f"for {len(blocked)}")
+            raise L3MVNError(
+                f"blocked_radius_cells: one radius per blocked cell, got {radius.shape[0]} for {len(blocked)}"
+            )
         distances = np.where((gap <= radius).any(axis=1), np.inf, distances)
     keep = _distance_filter(distances, cfg)
     if keep.size == 0:
@@ -132,8 +133,15 @@ def extract_frontiers(
     ]
 
 
-def _validate(explored: np.ndarray, obstacle: np.ndarray, agent_cell: tuple[int, int], distance_m: np.ndarray,
-              category_maps: np.ndarray, category_names: tuple[str, ...], cfg: FrontierConfig) -> None:
+def _validate(
+    explored: np.ndarray,
+    obstacle: np.ndarray,
+    agent_cell: tuple[int, int],
+    distance_m: np.ndarray,
+    category_maps: np.ndarray,
+    category_names: tuple[str, ...],
+    cfg: FrontierConfig,
+) -> None:
     if not isinstance(cfg, FrontierConfig):
         raise L3MVNError(f"cfg must be a FrontierConfig, got {type(cfg).__name__}")
     for name, arr in (("explored", explored), ("obstacle", obstacle)):
@@ -280,8 +288,9 @@ def _distance_filter(distances: np.ndarray, cfg: FrontierConfig) -> np.ndarray:
     return np.flatnonzero(within if within.any() else usable)
 
 
-def _turn_costs(centers: npt.NDArray[np.int64], agent_cell: tuple[int, int], heading: float | None,
-                cfg: FrontierConfig) -> npt.NDArray[np.float64]:
+def _turn_costs(
+    centers: npt.NDArray[np.int64], agent_cell: tuple[int, int], heading: float | None, cfg: FrontierConfig
+) -> npt.NDArray[np.float64]:
     """Metres charged for turning toward each centre (0 without a heading or a turn cost)."""
     if heading is None or cfg.turn_cost_m_per_rad == 0.0:
         return np.zeros(len(centers))
@@ -291,9 +300,7 @@ def _turn_costs(centers: npt.NDArray[np.int64], agent_cell: tuple[int, int], hea
     return costs
 
 
-def _cost_utility(
-    sizes: np.ndarray, distances: np.ndarray, cfg: FrontierConfig
-) -> tuple[np.ndarray, np.ndarray]:
+def _cost_utility(sizes: np.ndarray, distances: np.ndarray, cfg: FrontierConfig) -> tuple[np.ndarray, np.ndarray]:
     """(utility, S_CU) per cluster for the configured mode."""
     if cfg.utility == "official_code":
         utility = sizes + np.where(distances < cfg.near_bonus_m, cfg.near_bonus, 0.0)

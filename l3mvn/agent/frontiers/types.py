@@ -49,16 +49,20 @@ class Fusion:
         """The rule in one line with its numbers, ending with the winner against the runner-up."""
         name = "S_CU" if self.exploration == "cost-utility" else "nearness"
         if self.rule == "expected":
-            return ("expected: least metres to the frontier - size bonus + expected metres on to the goal: "
-                    + self._versus(self.compared, least=True, fmt=self._total))
+            return (
+                "expected: least metres to the frontier - size bonus + expected metres on to the goal: "
+                + self._versus(self.compared, least=True, fmt=self._total)
+            )
         if self.rule == "official_code":  # S_LLM as compared: a frontier without objects counts 0.1 + 0.1 U / max U
             head = f"official code: max S_LLM {max(self.compared):.2f}"
             if self.branch == "language":
                 return f"{head} > {self.threshold:g}, so the highest S_LLM: " + self._versus(self.compared)
             if self.branch == "first above 0.1":
                 k = self.choice
-                return (f"{head} <= {self.threshold:g}, so the first frontier by {name} with S_LLM > 0.1: "
-                        f"F{self.ids[k]} ({name} {self.explore[k]:.2f}, S_LLM {self.compared[k]:.2f})")
+                return (
+                    f"{head} <= {self.threshold:g}, so the first frontier by {name} with S_LLM > 0.1: "
+                    f"F{self.ids[k]} ({name} {self.explore[k]:.2f}, S_LLM {self.compared[k]:.2f})"
+                )
             return f"{head} <= {self.threshold:g}, so the best {name}: " + self._versus(self.explore)
         assert self.bound is not None  # the paper's rule always has its bound
         lo, hi = self.bound
@@ -67,15 +71,16 @@ class Fusion:
             return f"{head} is above B, so language alone decides: " + self._versus(self.s_llm)
         if self.branch == "exploration":
             return f"{head} is below B, so {name} alone decides: " + self._versus(self.explore)
-        return (f"{head} is inside B, so fused = max(S_LLM, {lo:.2f} + {hi - lo:.2f} x {name}): "
-                + self._versus(self.compared))
+        return f"{head} is inside B, so fused = max(S_LLM, {lo:.2f} + {hi - lo:.2f} x {name}): " + self._versus(
+            self.compared
+        )
 
     def _total(self, k: int) -> str:
-        return (f"{self.cost_m[k]:.1f} - {self.bonus_m[k]:.1f} + {self.expected_m[k]:.1f} "
-                f"= {self.compared[k]:.1f} m")
+        return f"{self.cost_m[k]:.1f} - {self.bonus_m[k]:.1f} + {self.expected_m[k]:.1f} = {self.compared[k]:.1f} m"
 
-    def _versus(self, values: tuple[float, ...], *, least: bool = False,
-                fmt: Callable[[int], str] | None = None) -> str:
+    def _versus(
+        self, values: tuple[float, ...], *, least: bool = False, fmt: Callable[[int], str] | None = None
+    ) -> str:
         """``F<choice> <value> beats F<runner-up> <value>`` (the best other frontier by ``values``)."""
         show = fmt or (lambda k: f"{values[k]:.2f}")
         k = self.choice

@@ -5,8 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from l3mvn.agent.language.cooccurrence import (
-    BUILD_COMMAND, DEFAULT_ALPHA, DEFAULT_LIST_SIZE, DEFAULT_MIN_ROOMS, MAPPABLE_OBJECTS, STATS_PATH,
-    CooccurrenceStats, build_stats, save_stats,
+    BUILD_COMMAND,
+    DEFAULT_ALPHA,
+    DEFAULT_LIST_SIZE,
+    DEFAULT_MIN_ROOMS,
+    MAPPABLE_OBJECTS,
+    STATS_PATH,
+    CooccurrenceStats,
+    build_stats,
+    save_stats,
 )
 from l3mvn.agent.language.rooms import default_gibson_rooms_path, default_thor_metadata_path, load_rooms
 
@@ -26,13 +33,17 @@ def build_stats_file(
     rooms = load_rooms(gibson_rooms, thor_metadata)
     sources = sorted({r.source for r in rooms})
     provenance = {
-        "command": BUILD_COMMAND + (f" --alpha {alpha}" if alpha != DEFAULT_ALPHA else "")
+        "command": BUILD_COMMAND
+        + (f" --alpha {alpha}" if alpha != DEFAULT_ALPHA else "")
         + (f" --min-rooms {min_rooms}" if min_rooms != DEFAULT_MIN_ROOMS else ""),
         "sources": {
             "gibson-3dsg": "shared/data/room_objects/gibson_3dsg_rooms.jsonl (Gibson 3D scene graphs; no tv class)"
-            if "gibson-3dsg" in sources and gibson.exists() else None,
-            "ai2thor": "procthor==0.0.1.dev2 databases/ai2thor-object-metadata.json (120 iTHOR rooms; RoboTHOR apartments left out)"
-            if "ai2thor" in sources and thor else None,
+            if "gibson-3dsg" in sources and gibson.exists()
+            else None,
+            "ai2thor": "procthor==0.0.1.dev2 databases/ai2thor-object-metadata.json "
+            "(120 iTHOR rooms; RoboTHOR apartments left out)"
+            if "ai2thor" in sources and thor
+            else None,
         },
         "entropy": "natural log over the 6 goals",
     }

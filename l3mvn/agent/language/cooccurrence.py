@@ -30,27 +30,44 @@ from typing import Any
 
 import numpy as np
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.language.rooms import Room
 from l3mvn.agent.language.vocabulary import GOALS, canonical
 from l3mvn.core.categories import GIBSON_CATEGORIES
-from l3mvn.core.writing import write_file
+from l3mvn.core.errors import L3MVNError
 from l3mvn.core.paths import PACKAGE_DATA
+from l3mvn.core.writing import write_file
 
 DATA_DIR = PACKAGE_DATA / "language"
 STATS_PATH = DATA_DIR / "cooccurrence.json"
 BUILD_COMMAND = "l3mvn language build-stats"
 
 # Categories a semantic map can hold: the SemExp/Gibson channels plus the household objects of the
-# procedural scenes (the categories of ``l3mvn.world.scenes.room_contents``). Only these may enter the informative list: a potato or a
-# plunger is very informative but no map of ours ever shows one.
-MAPPABLE_OBJECTS: tuple[str, ...] = tuple(dict.fromkeys(
-    [canonical(c) for c in GIBSON_CATEGORIES] + [
-        "bathtub", "shower", "towel", "dresser", "side table", "desk", "coffee table", "tv stand",
-        "shelving unit", "counter", "lamp", "microwave", "toaster", "coffee machine", "garbage can",
-        "laptop", "laundry hamper",
-    ]
-))
+# procedural scenes (the categories of ``l3mvn.world.scenes.room_contents``). Only these may enter the
+# informative list: a potato or a plunger is very informative but no map of ours ever shows one.
+MAPPABLE_OBJECTS: tuple[str, ...] = tuple(
+    dict.fromkeys(
+        [canonical(c) for c in GIBSON_CATEGORIES]
+        + [
+            "bathtub",
+            "shower",
+            "towel",
+            "dresser",
+            "side table",
+            "desk",
+            "coffee table",
+            "tv stand",
+            "shelving unit",
+            "counter",
+            "lamp",
+            "microwave",
+            "toaster",
+            "coffee machine",
+            "garbage can",
+            "laptop",
+            "laundry hamper",
+        ]
+    )
+)
 DEFAULT_ALPHA = 2.0
 DEFAULT_MIN_ROOMS = 10
 DEFAULT_LIST_SIZE = 15
@@ -90,18 +107,22 @@ class CooccurrenceStats:
             "goals": list(self.goals),
             "informative": list(self.informative),
             "objects": {
-                o.name: {"rooms": o.rooms, "entropy": round(o.entropy, 6),
-                         "p_goal": {g: round(p, 6) for g, p in o.p_goal.items()}}
+                o.name: {
+                    "rooms": o.rooms,
+                    "entropy": round(o.entropy, 6),
+                    "p_goal": {g: round(p, 6) for g, p in o.p_goal.items()},
+                }
                 for o in sorted(self.objects.values(), key=lambda s: (s.entropy, s.name))
             },
         }
 
     @classmethod
-    def from_json(cls, data: dict[str, Any]) -> "CooccurrenceStats":
+    def from_json(cls, data: dict[str, Any]) -> CooccurrenceStats:
         try:
             objects = {
-                name: ObjectStats(name, int(v["rooms"]), {g: float(p) for g, p in v["p_goal"].items()},
-                                  float(v["entropy"]))
+                name: ObjectStats(
+                    name, int(v["rooms"]), {g: float(p) for g, p in v["p_goal"].items()}, float(v["entropy"])
+                )
                 for name, v in data["objects"].items()
             }
             return cls(objects, tuple(data["informative"]), tuple(data["goals"]), dict(data.get("provenance", {})))
@@ -149,9 +170,14 @@ def build_stats(
     wanted = {canonical(c) for c in candidates}
     eligible = [o for o in names if o in wanted and rooms_with[o] >= min_rooms]
     informative = tuple(sorted(eligible, key=lambda o: (objects[o].entropy, o))[:list_size])
-    prov = {"alpha": alpha, "min_rooms": min_rooms, "list_size": list_size,
-            "candidates": sorted(wanted), "rooms": len(rooms),
-            "rooms_by_source": dict(Counter(r.source for r in rooms))}
+    prov = {
+        "alpha": alpha,
+        "min_rooms": min_rooms,
+        "list_size": list_size,
+        "candidates": sorted(wanted),
+        "rooms": len(rooms),
+        "rooms_by_source": dict(Counter(r.source for r in rooms)),
+    }
     prov.update(provenance or {})
     return CooccurrenceStats(objects, informative, GOALS, prov)
 
@@ -186,14 +212,25 @@ def stats_table(stats: CooccurrenceStats | None = None, min_rooms: int = 1) -> s
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     rows = sorted((o for o in stats.objects.values() if o.rooms >= min_rooms), key=lambda o: (o.entropy, o.name))
     for o in rows:
-        cells = [o.name, str(o.rooms), *[f"{o.p_goal[g]:.2f}" for g in stats.goals], f"{o.entropy:.3f}",
-                 str(rank.get(o.name, ""))]
+        cells = [
+            o.name,
+            str(o.rooms),
+            *[f"{o.p_goal[g]:.2f}" for g in stats.goals],
+            f"{o.entropy:.3f}",
+            str(rank.get(o.name, "")),
+        ]
         lines.append("| " + " | ".join(cells) + " |")
     lines.append(f"\ninformative list ({len(stats.informative)}): {', '.join(stats.informative)}")
     return "\n".join(lines)
 
 
 __all__ = [
-    "ObjectStats", "CooccurrenceStats", "MAPPABLE_OBJECTS", "STATS_PATH", "build_stats", "save_stats",
-    "load_stats", "stats_table",
+    "ObjectStats",
+    "CooccurrenceStats",
+    "MAPPABLE_OBJECTS",
+    "STATS_PATH",
+    "build_stats",
+    "save_stats",
+    "load_stats",
+    "stats_table",
 ]

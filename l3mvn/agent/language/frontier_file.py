@@ -13,9 +13,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.language.queries import feedforward_query
 from l3mvn.agent.language.vocabulary import GOALS, canonical
+from l3mvn.core.errors import L3MVNError
 
 
 def frontier_query(objects: Sequence[str]) -> str:
@@ -56,16 +56,30 @@ def load_choices(path: str | Path) -> list[Choice]:
             if "done" in row:
                 continue
             frontiers = tuple(
-                FrontierRecord(tuple(sorted(canonical(o) for o in f["objects"])), float(f["cost"]), float(f["utility"]),
-                               float(f["s_cu"]),
-                               {g: math.inf if f["goal_m"].get(g) is None else float(f["goal_m"][g]) for g in GOALS})
+                FrontierRecord(
+                    tuple(sorted(canonical(o) for o in f["objects"])),
+                    float(f["cost"]),
+                    float(f["utility"]),
+                    float(f["s_cu"]),
+                    {g: math.inf if f["goal_m"].get(g) is None else float(f["goal_m"][g]) for g in GOALS},
+                )
                 for f in row["frontiers"]
             )
-            out.append(Choice(str(row["house"]), str(row["episode"]), int(row["seed"]), str(row["goal"]),
-                              frozenset(canonical(o) for o in row["mapped"]), frontiers))
+            out.append(
+                Choice(
+                    str(row["house"]),
+                    str(row["episode"]),
+                    int(row["seed"]),
+                    str(row["goal"]),
+                    frozenset(canonical(o) for o in row["mapped"]),
+                    frontiers,
+                )
+            )
         except (json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise L3MVNError(f"{path}:{n}: not a frontier-data line ({type(exc).__name__}: "
-                             f"{str(exc).splitlines()[0][:80] if str(exc) else ''})") from None
+            raise L3MVNError(
+                f"{path}:{n}: not a frontier-data line ({type(exc).__name__}: "
+                f"{str(exc).splitlines()[0][:80] if str(exc) else ''})"
+            ) from None
     if not out:
         raise L3MVNError(f"{path}: no frontier choice in it")
     return out

@@ -41,8 +41,6 @@ import numpy as np
 import torch
 from torch import nn
 
-from l3mvn.core.config import FrontierConfig
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.language.frontier_file import Choice, frontier_query, load_choices
 from l3mvn.agent.language.head import (
     BAG,
@@ -54,6 +52,8 @@ from l3mvn.agent.language.head import (
 )
 from l3mvn.agent.language.models import MINILM, load_sentence_encoder
 from l3mvn.agent.language.vocabulary import GOALS
+from l3mvn.core.config import FrontierConfig
+from l3mvn.core.errors import L3MVNError
 
 HOUSE_SPLITS = ("train", "val", "test")
 # Of 100 hash buckets: test first, then val, the rest train (a small set of houses meets these shares roughly).
@@ -88,8 +88,9 @@ class RankingLists:
         return len(self.goal)
 
     def take(self, idx: torch.Tensor) -> RankingLists:
-        return RankingLists(*(t[idx] for t in (self.sentence, self.mask, self.cost, self.base, self.dist, self.s_cu,
-                                               self.goal)))
+        return RankingLists(
+            *(t[idx] for t in (self.sentence, self.mask, self.cost, self.base, self.dist, self.s_cu, self.goal))
+        )
 
 
 def ranking_lists(choices: Sequence[Choice], sentences: dict[str, int], cu_lambda: float) -> RankingLists:
@@ -113,7 +114,7 @@ def ranking_lists(choices: Sequence[Choice], sentences: dict[str, int], cu_lambd
     sentence = torch.zeros((n, width), dtype=torch.long)
     mask = torch.zeros((n, width), dtype=torch.bool)
     cost, base, dist, s_cu = (torch.zeros((n, width)) for _ in range(4))
-    for r, (ch, g, d) in enumerate(rows):
+    for r, (ch, _, d) in enumerate(rows):
         k = len(ch.frontiers)
         sentence[r, :k] = torch.tensor([sentences[frontier_query(f.objects)] for f in ch.frontiers])
         mask[r, :k] = True
@@ -184,8 +185,10 @@ def train_frontier_head(
     the shipped frontier head for ``model``, or for ``bag``) and return the metrics written into its
     meta. ``bag``: the input is the bag of window objects and ``model`` is not read."""
     if epochs < 1 or batch_size < 2 or not tau > 0 or calibration < 0 or not cu_lambda > 0:
-        raise L3MVNError(f"need epochs >= 1, batch_size >= 2, tau > 0, calibration >= 0, cu_lambda > 0; got "
-                         f"{epochs}, {batch_size}, {tau}, {calibration}, {cu_lambda}")
+        raise L3MVNError(
+            f"need epochs >= 1, batch_size >= 2, tau > 0, calibration >= 0, cu_lambda > 0; got "
+            f"{epochs}, {batch_size}, {tau}, {calibration}, {cu_lambda}"
+        )
     if not data:
         raise L3MVNError("no frontier data: pass --data FILE (made by `l3mvn language frontier-data`)")
     key = FRONTIER_HEAD_KIND + BAG if bag else f"{model.lower()}-{FRONTIER_HEAD_KIND}"
@@ -196,15 +199,28 @@ def train_frontier_head(
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # tiny matrices: a second thread only waits for a shared CPU
     try:
-        return _train(data, model, out, epochs, lr, weight_decay, batch_size, tau, calibration, cu_lambda, seed,
-                      command, bag)
+        return _train(
+            data, model, out, epochs, lr, weight_decay, batch_size, tau, calibration, cu_lambda, seed, command, bag
+        )
     finally:
         torch.set_num_threads(threads)
 
 
-def _train(data: Sequence[str | Path], model: str, out: str | Path, epochs: int, lr: float, weight_decay: float,
-           batch_size: int, tau: float, calibration: float, cu_lambda: float, seed: int, command: str,
-           bag: bool) -> dict[str, Any]:
+def _train(
+    data: Sequence[str | Path],
+    model: str,
+    out: str | Path,
+    epochs: int,
+    lr: float,
+    weight_decay: float,
+    batch_size: int,
+    tau: float,
+    calibration: float,
+    cu_lambda: float,
+    seed: int,
+    command: str,
+    bag: bool,
+) -> dict[str, Any]:
     torch.manual_seed(seed)
     random.seed(seed)
     np.random.seed(seed)
@@ -213,8 +229,9 @@ def _train(data: Sequence[str | Path], model: str, out: str | Path, epochs: int,
     houses = {s: sorted({c.house for c in by_split[s]}) for s in HOUSE_SPLITS}
     if not by_split["train"] or not by_split["val"]:
         raise L3MVNError(f"need choices on train and validation houses; got houses {houses}")
-    objects = {frontier_query(f.objects): f.objects for c in choices if house_split(c.house) != "test"
-               for f in c.frontiers}
+    objects = {
+        frontier_query(f.objects): f.objects for c in choices if house_split(c.house) != "test" for f in c.frontiers
+    }
     texts = sorted(objects)
     sentences = {t: i for i, t in enumerate(texts)}
     vocabulary = sorted({o for objs in objects.values() for o in objs})
@@ -227,8 +244,10 @@ def _train(data: Sequence[str | Path], model: str, out: str | Path, epochs: int,
 
     head = GoalHead(table.shape[1], len(GOALS))
     with torch.no_grad():  # start at the mean distance per goal: the listwise term then only ranks
-        mean = [float(train.dist[train.mask & (train.goal[:, None] == g)].mean()) if (train.goal == g).any() else 0.0
-                for g in range(len(GOALS))]
+        mean = [
+            float(train.dist[train.mask & (train.goal[:, None] == g)].mean()) if (train.goal == g).any() else 0.0
+            for g in range(len(GOALS))
+        ]
         last = head.net[-1]
         assert isinstance(last, nn.Linear)  # GoalHead ends in its output layer
         last.bias.copy_(torch.tensor(mean))
@@ -248,27 +267,50 @@ def _train(data: Sequence[str | Path], model: str, out: str | Path, epochs: int,
         if score < best[0]:
             best = (score, epoch, {k: v.clone() for k, v in head.state_dict().items()})
     if best[2] is None:  # every epoch's validation regret was NaN or infinite: the training diverged
-        raise L3MVNError(f"training diverged: no epoch of {epochs} gave a finite validation regret; lower the "
-                         "learning rate or check the data for non-finite values")
+        raise L3MVNError(
+            f"training diverged: no epoch of {epochs} gave a finite validation regret; lower the "
+            "learning rate or check the data for non-finite values"
+        )
     head.load_state_dict(best[2])
     metrics = {
-        "best_epoch": best[1] + 1, "epochs": epochs,
-        "train": _scores(head, table, train), "val": _scores(head, table, val),
-        "choices": {s: len(by_split[s]) for s in HOUSE_SPLITS}, "sentences": len(texts),
+        "best_epoch": best[1] + 1,
+        "epochs": epochs,
+        "train": _scores(head, table, train),
+        "val": _scores(head, table, val),
+        "choices": {s: len(by_split[s]) for s in HOUSE_SPLITS},
+        "sentences": len(texts),
     }
-    settings = {"epochs": epochs, "lr": lr, "weight_decay": weight_decay, "batch_size": batch_size, "tau": tau,
-                "calibration": calibration, "cu_lambda": cu_lambda, "seed": seed}
+    settings = {
+        "epochs": epochs,
+        "lr": lr,
+        "weight_decay": weight_decay,
+        "batch_size": batch_size,
+        "tau": tau,
+        "calibration": calibration,
+        "cu_lambda": cu_lambda,
+        "seed": seed,
+    }
     meta = {
-        "kind": FRONTIER_HEAD_KIND, "output": "metres", "object_filter": "all", "encoder": model,
-        "goals": list(GOALS), "houses": houses, "data": [str(p) for p in data],
-        "command": command or f"l3mvn train-head --data {' '.join(map(str, data))}", "metrics": metrics,
+        "kind": FRONTIER_HEAD_KIND,
+        "output": "metres",
+        "object_filter": "all",
+        "encoder": model,
+        "goals": list(GOALS),
+        "houses": houses,
+        "data": [str(p) for p in data],
+        "command": command or f"l3mvn train-head --data {' '.join(map(str, data))}",
+        "metrics": metrics,
         "settings": settings,
     }
     if bag:
         del meta["encoder"]
-        meta |= {"kind": FRONTIER_HEAD_KIND + BAG, "features": BAG_FEATURES, "vocabulary": vocabulary,
-                 "command": command or f"l3mvn train-head --head {FRONTIER_HEAD_KIND + BAG} --data "
-                                       f"{' '.join(map(str, data))}"}
+        meta |= {
+            "kind": FRONTIER_HEAD_KIND + BAG,
+            "features": BAG_FEATURES,
+            "vocabulary": vocabulary,
+            "command": command
+            or f"l3mvn train-head --head {FRONTIER_HEAD_KIND + BAG} --data {' '.join(map(str, data))}",
+        }
     save_head(head, meta, out)
     return {**metrics, "houses": houses, "path": str(out)}
 

@@ -23,8 +23,8 @@ import torch
 from torch import nn
 
 from l3mvn.core.errors import L3MVNError
-from l3mvn.core.writing import write_file
 from l3mvn.core.paths import PACKAGE_DATA
+from l3mvn.core.writing import write_file
 
 DATA_DIR = PACKAGE_DATA / "language"
 # "<embedder>" is the room-list head (the paper's recipe), "<embedder>-frontiers" the one trained on

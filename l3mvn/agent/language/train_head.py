@@ -29,7 +29,6 @@ import numpy as np
 import torch
 from torch import nn
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.language.cooccurrence import CooccurrenceStats, load_stats
 from l3mvn.agent.language.head import (
     BAG,
@@ -45,6 +44,7 @@ from l3mvn.agent.language.models import MINILM, SentenceEncoder, load_sentence_e
 from l3mvn.agent.language.queries import feedforward_query
 from l3mvn.agent.language.rooms import Room, load_rooms, rooms_in
 from l3mvn.agent.language.vocabulary import GOALS
+from l3mvn.core.errors import L3MVNError
 
 TRAIN_COMMAND = "l3mvn train-head"
 ROOMS_BAG = "rooms" + BAG
@@ -64,7 +64,9 @@ def room_samples(rooms: list[Room], stats: CooccurrenceStats, max_objects: int =
             others = stats.informative_in(room.objects - {goal})
             if not others:
                 continue
-            subsets = {c for n in range(1, min(max_objects, len(others)) + 1) for c in itertools.combinations(others, n)}
+            subsets = {
+                c for n in range(1, min(max_objects, len(others)) + 1) for c in itertools.combinations(others, n)
+            }
             subsets.add(others)
             out += [Sample(s, goal, 1.0 / len(subsets)) for s in sorted(subsets)]
     return out
@@ -88,7 +90,9 @@ def train_head(
     ``model``, or for ``bag``) and return the metrics written into the file's meta. ``bag``: the
     input is the bag of objects over the informative list and ``model`` is not read."""
     if epochs < 1 or batch_size < 2 or max_objects < 1:
-        raise L3MVNError(f"need epochs >= 1, batch_size >= 2, max_objects >= 1; got {epochs}, {batch_size}, {max_objects}")
+        raise L3MVNError(
+            f"need epochs >= 1, batch_size >= 2, max_objects >= 1; got {epochs}, {batch_size}, {max_objects}"
+        )
     key = ROOMS_BAG if bag else model.lower()
     if out is None:
         if key not in SHIPPED_HEADS:
@@ -133,32 +137,51 @@ def train_head(
         if val_loss < best[0]:
             best = (val_loss, epoch, {k: v.clone() for k, v in head.state_dict().items()})
     if best[2] is None:  # every epoch's validation loss was NaN or infinite: the training diverged
-        raise L3MVNError(f"training diverged: no epoch of {epochs} gave a finite validation loss; lower the "
-                         "learning rate or check the data for non-finite values")
+        raise L3MVNError(
+            f"training diverged: no epoch of {epochs} gave a finite validation loss; lower the "
+            "learning rate or check the data for non-finite values"
+        )
     head.load_state_dict(best[2])
     train_loss, train_acc = _evaluate(head, xt, yt, wt)
     val_loss, val_acc = _evaluate(head, xv, yv, wv)
     metrics = {
-        "best_epoch": best[1] + 1, "epochs": epochs, "train_loss": round(train_loss, 4),
-        "train_accuracy": round(train_acc, 4), "val_loss": round(val_loss, 4), "val_accuracy": round(val_acc, 4),
+        "best_epoch": best[1] + 1,
+        "epochs": epochs,
+        "train_loss": round(train_loss, 4),
+        "train_accuracy": round(train_acc, 4),
+        "val_loss": round(val_loss, 4),
+        "val_accuracy": round(val_acc, 4),
         "val_majority_accuracy": round(_majority(yt, yv, wv), 4),
-        "train_samples": len(train), "val_samples": len(val),
-        "train_rooms": len(rooms_in(rooms, "train")), "val_rooms": len(rooms_in(rooms, "val")),
+        "train_samples": len(train),
+        "val_samples": len(val),
+        "train_rooms": len(rooms_in(rooms, "train")),
+        "val_rooms": len(rooms_in(rooms, "val")),
     }
-    settings = {"epochs": epochs, "lr": lr, "weight_decay": weight_decay, "batch_size": batch_size,
-                "max_objects": max_objects, "seed": seed}
+    settings = {
+        "epochs": epochs,
+        "lr": lr,
+        "weight_decay": weight_decay,
+        "batch_size": batch_size,
+        "max_objects": max_objects,
+        "seed": seed,
+    }
     meta = {"goals": list(GOALS), "informative": list(stats.informative), "metrics": metrics, "settings": settings}
     if bag:
-        meta |= {"kind": ROOMS_BAG, "features": BAG_FEATURES, "vocabulary": list(stats.informative),
-                 "command": f"{TRAIN_COMMAND} --head {ROOMS_BAG} --seed {seed}"}
+        meta |= {
+            "kind": ROOMS_BAG,
+            "features": BAG_FEATURES,
+            "vocabulary": list(stats.informative),
+            "command": f"{TRAIN_COMMAND} --head {ROOMS_BAG} --seed {seed}",
+        }
     else:
         meta |= {"encoder": model, "command": f"{TRAIN_COMMAND} --model {model}"}
     save_head(head, meta, out)
     return {**metrics, "path": str(out)}
 
 
-def _tensors(samples: list[Sample], featurise: Callable[[list[tuple[str, ...]]], np.ndarray]
-             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _tensors(
+    samples: list[Sample], featurise: Callable[[list[tuple[str, ...]]], np.ndarray]
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``featurise`` maps object tuples to one input row each; it runs once per distinct tuple."""
     sets = sorted({s.objects for s in samples})
     rows = dict(zip(sets, np.asarray(featurise(sets), dtype=np.float32)))
@@ -192,14 +215,20 @@ def _majority(yt: torch.Tensor, yv: torch.Tensor, wv: torch.Tensor) -> float:
     return float(((yv == top).float() * wv).sum() / wv.sum())
 
 
-def train_any_head(head: str, data: list[str] | None = None, model: str = MINILM, out: str | Path | None = None,
-                   gibson_rooms: str | Path | None = None, epochs: int | None = None,
-                   seed: int = 0) -> dict[str, Any]:
+def train_any_head(
+    head: str,
+    data: list[str] | None = None,
+    model: str = MINILM,
+    out: str | Path | None = None,
+    gibson_rooms: str | Path | None = None,
+    epochs: int | None = None,
+    seed: int = 0,
+) -> dict[str, Any]:
     """``l3mvn train-head``: a frontier head from ``data`` or a room-list head from room data, on
     sentence embeddings or (``*-bag``) bags of objects, each with its own default epochs; flags that
     do not apply to ``head`` are refused."""
-    from l3mvn.core.config.policy import HEAD_KINDS
     from l3mvn.agent.language.frontier_head import train_frontier_head
+    from l3mvn.core.config.policy import HEAD_KINDS
 
     if head not in HEAD_KINDS:
         raise L3MVNError(f"unknown head {head!r}; valid: {', '.join(HEAD_KINDS)}")
@@ -213,8 +242,12 @@ def train_any_head(head: str, data: list[str] | None = None, model: str = MINILM
         return train_head(model=model, out=out, gibson_rooms=gibson_rooms, seed=seed, bag=bag, **extra)
     if gibson_rooms:
         raise L3MVNError(f"--gibson-rooms is room data, for --head rooms; the {head} head reads --data")
-    command = f"{TRAIN_COMMAND} --head {head} --data {' '.join(map(str, data or []))}" + (
-        "" if bag else f" --model {model}") + (f" --epochs {epochs}" if epochs is not None else "") + f" --seed {seed}"
+    command = (
+        f"{TRAIN_COMMAND} --head {head} --data {' '.join(map(str, data or []))}"
+        + ("" if bag else f" --model {model}")
+        + (f" --epochs {epochs}" if epochs is not None else "")
+        + f" --seed {seed}"
+    )
     return train_frontier_head(data or [], model=model, out=out, seed=seed, command=command, bag=bag, **extra)
 
 

@@ -24,8 +24,8 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
+from l3mvn.core.errors import L3MVNError
 
 GOALS: tuple[str, ...] = GOAL_CATEGORIES
 
@@ -109,9 +109,7 @@ def to_gibson(name: str) -> str:
     """The SemExp map-channel spelling of a category (``"dining table"`` -> ``"dining-table"``)."""
     key = canonical(name)
     if key not in _GIBSON_BY_CANONICAL:
-        raise L3MVNError(
-            f"{name!r} is not a SemExp/Gibson map category; valid: {', '.join(GIBSON_CATEGORIES)}"
-        )
+        raise L3MVNError(f"{name!r} is not a SemExp/Gibson map category; valid: {', '.join(GIBSON_CATEGORIES)}")
     return _GIBSON_BY_CANONICAL[key]
 
 
@@ -121,6 +119,13 @@ def to_coco(name: str) -> str:
 
 
 __all__ = [
-    "GOALS", "ALIASES", "QUERY_PHRASES", "canonical", "canonical_set", "check_goal", "query_phrase",
-    "to_gibson", "to_coco",
+    "GOALS",
+    "ALIASES",
+    "QUERY_PHRASES",
+    "canonical",
+    "canonical_set",
+    "check_goal",
+    "query_phrase",
+    "to_gibson",
+    "to_coco",
 ]

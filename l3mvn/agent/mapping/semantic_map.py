@@ -15,10 +15,10 @@ from typing import overload
 import numpy as np
 import numpy.typing as npt
 
+from l3mvn.core.camera import CameraIntrinsics, depth_to_points, too_near_points
 from l3mvn.core.config import MapConfig, SimConfig
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.grid import disk
-from l3mvn.core.camera import CameraIntrinsics, depth_to_points, too_near_points
 from l3mvn.core.types import Pose, wrap_angle
 
 
@@ -95,8 +95,9 @@ class SemanticMap:
     @overload
     def cell_to_world(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
 
-    def cell_to_world(self, row: int | np.ndarray,
-                      col: int | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
+    def cell_to_world(
+        self, row: int | np.ndarray, col: int | np.ndarray
+    ) -> tuple[float | np.ndarray, float | np.ndarray]:
         """World (x, y) of the cell's centre; rows and columns may be arrays."""
         half = self.size // 2
         return (
@@ -106,8 +107,9 @@ class SemanticMap:
 
     def explored_at(self, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
         """Whether each world point (x, y) lies on an explored cell; points off the map are not."""
-        rows, cols = _cells(np.asarray(xs) - self.start_xy[0], np.asarray(ys) - self.start_xy[1],
-                            self.resolution_m, self.size)
+        rows, cols = _cells(
+            np.asarray(xs) - self.start_xy[0], np.asarray(ys) - self.start_xy[1], self.resolution_m, self.size
+        )
         ok = (rows >= 0) & (rows < self.size) & (cols >= 0) & (cols < self.size)
         out = np.zeros(rows.shape, dtype=bool)
         out[ok] = self.explored[rows[ok], cols[ok]]
@@ -140,7 +142,7 @@ class SemanticMap:
         fixed = np.stack([self.obstacle, self.explored, self.current, self.visited])
         return np.concatenate([fixed, self.categories], axis=0)
 
-    def copy(self) -> "SemanticMap":
+    def copy(self) -> SemanticMap:
         return SemanticMap(
             obstacle=self.obstacle.copy(),
             explored=self.explored.copy(),
@@ -165,8 +167,16 @@ class SemanticMapper:
     k = category_names[k - 1]) or None, the odometry pose and the camera tilt in radians.
     """
 
-    def __init__(self, cfg: MapConfig, intrinsics: CameraIntrinsics, category_names: tuple[str, ...], *,
-                 max_depth_m: float, body_radius_m: float, min_depth_m: float = 0.0) -> None:
+    def __init__(
+        self,
+        cfg: MapConfig,
+        intrinsics: CameraIntrinsics,
+        category_names: tuple[str, ...],
+        *,
+        max_depth_m: float,
+        body_radius_m: float,
+        min_depth_m: float = 0.0,
+    ) -> None:
         """``max_depth_m``: the sensor's range (readings at or beyond it are saturation, not a
         surface); ``body_radius_m``: the agent's, whose footprint counts as explored;
         ``min_depth_m``: the range below which the sensor reads 0 (0: it reads every range), so an
@@ -175,8 +185,10 @@ class SemanticMapper:
         if len(set(names)) != len(names):
             raise L3MVNError(f"duplicate map categories in {names}")
         if not (max_depth_m > 0 and body_radius_m >= 0 and 0 <= min_depth_m < max_depth_m):
-            raise L3MVNError(f"need max_depth_m > 0, body_radius_m >= 0 and 0 <= min_depth_m < max_depth_m, "
-                             f"got {max_depth_m}, {body_radius_m}, {min_depth_m}")
+            raise L3MVNError(
+                f"need max_depth_m > 0, body_radius_m >= 0 and 0 <= min_depth_m < max_depth_m, "
+                f"got {max_depth_m}, {body_radius_m}, {min_depth_m}"
+            )
         self.cfg = cfg
         self.intrinsics = intrinsics
         self.max_depth_m = max_depth_m
@@ -203,11 +215,18 @@ class SemanticMapper:
         self._heading = 0.0
 
     @classmethod
-    def for_sim(cls, cfg: MapConfig, sim: SimConfig, height: int, width: int,
-                category_names: tuple[str, ...]) -> "SemanticMapper":
+    def for_sim(
+        cls, cfg: MapConfig, sim: SimConfig, height: int, width: int, category_names: tuple[str, ...]
+    ) -> SemanticMapper:
         """A mapper for the simulated robot's camera fed ``height`` x ``width`` frames."""
-        return cls(cfg, CameraIntrinsics.from_sim(sim, height, width), category_names,
-                   max_depth_m=sim.max_depth_m, body_radius_m=sim.agent_radius_m, min_depth_m=sim.min_depth_m)
+        return cls(
+            cfg,
+            CameraIntrinsics.from_sim(sim, height, width),
+            category_names,
+            max_depth_m=sim.max_depth_m,
+            body_radius_m=sim.agent_radius_m,
+            min_depth_m=sim.min_depth_m,
+        )
 
     @property
     def map(self) -> SemanticMap:
@@ -231,8 +250,15 @@ class SemanticMapper:
 
     def reset(self, start_pose: Pose) -> SemanticMap:
         """Clear everything; ``start_pose`` becomes the map centre (heading kept as is)."""
-        for grid in (self._obstacle, self._inferred, self._explored, self._visited, self._looked, self._categories,
-                     self._counts):
+        for grid in (
+            self._obstacle,
+            self._inferred,
+            self._explored,
+            self._visited,
+            self._looked,
+            self._categories,
+            self._counts,
+        ):
             grid.fill(0)
         self._start = start_pose
         self._cell = (self.cfg.map_cells // 2, self.cfg.map_cells // 2)
@@ -342,8 +368,9 @@ class SemanticMapper:
         self._looked.reshape(-1)[flat[near]] = True
         return flat
 
-    def _infer_too_near(self, depth: np.ndarray, pose: Pose, tilt: float, seen_obstacle: np.ndarray,
-                        seen_free: np.ndarray) -> None:
+    def _infer_too_near(
+        self, depth: np.ndarray, pose: Pose, tilt: float, seen_obstacle: np.ndarray, seen_free: np.ndarray
+    ) -> None:
         """Obstacles nearer than the sensor's minimum range (``too_near_points``) are a guess, put at
         the farthest such an obstacle can be: in front of a wall that lies inside it, but round a
         corner (a door frame) it is floor. So a guess never lands on floor the map has seen, floor
@@ -380,8 +407,9 @@ class SemanticMapper:
         self._looked[rr, cc] = True
 
 
-def _cells(dx: float | np.ndarray, dy: float | np.ndarray, resolution_m: float,
-           size: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+def _cells(
+    dx: float | np.ndarray, dy: float | np.ndarray, resolution_m: float, size: int
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """(rows, cols) of offsets (dx, dy) from the map centre, in metres; scalars or arrays."""
     half = size // 2
     rows = np.floor(np.asarray(dy) / resolution_m).astype(np.int64) + half
@@ -400,4 +428,3 @@ def _footprint_cells(cell: tuple[int, int], radius: int, size: int) -> tuple[np.
     rr, cc = dr - radius + cell[0], dc - radius + cell[1]
     inside = (rr >= 0) & (rr < size) & (cc >= 0) & (cc < size)
     return rr[inside], cc[inside]
-

@@ -15,13 +15,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from l3mvn.core.config import Config
 from l3mvn.agent.decision import GoalKind
 from l3mvn.agent.frontiers import Frontier, extract_frontiers
 from l3mvn.agent.looking import look_goal
 from l3mvn.agent.mapping import SemanticMap
 from l3mvn.agent.planning import LocalPlanner
 from l3mvn.agent.policies.global_policies import GlobalPolicy, Selection
+from l3mvn.core.config import Config
 
 Cell = tuple[int, int]
 
@@ -111,8 +111,13 @@ class ExplorationGoals:
         return self.cfg.blocked_radius_m / resolution_m
 
     def _look_goal(self, sem_map: SemanticMap) -> Cell | None:
-        return look_goal(sem_map, self.planner, self.blocked, self.blocked_radius_cells(sem_map.resolution_m),
-                         self.cfg.look_min_area_m2)
+        return look_goal(
+            sem_map,
+            self.planner,
+            self.blocked,
+            self.blocked_radius_cells(sem_map.resolution_m),
+            self.cfg.look_min_area_m2,
+        )
 
     def extract(self, sem_map: SemanticMap, obstacle: np.ndarray | None = None) -> list[Frontier]:
         """Frontiers of the map, cut where ``obstacle`` (default: the map's, guesses included) lies."""
@@ -122,15 +127,23 @@ class ExplorationGoals:
         rows = np.flatnonzero(sem_map.explored.any(axis=1))
         cols = np.flatnonzero(sem_map.explored.any(axis=0))
         last = sem_map.size - 1
-        corners = np.array([[max(rows[0] - 1, 0), max(cols[0] - 1, 0)],
-                            [min(rows[-1] + 1, last), min(cols[-1] + 1, last)]])
+        corners = np.array(
+            [[max(rows[0] - 1, 0), max(cols[0] - 1, 0)], [min(rows[-1] + 1, last), min(cols[-1] + 1, last)]]
+        )
         field_ = self.planner.distance_from_agent(sem_map.obstacle, sem_map.agent_cell, targets=corners).full()
-        return extract_frontiers(sem_map.explored, obstacle, sem_map.agent_cell, field_,
-                                 sem_map.categories, sem_map.category_names, self.config.frontiers,
-                                 resolution_m=sem_map.resolution_m,
-                                 blocked=np.array(self.blocked, dtype=np.int64).reshape(-1, 2),
-                                 blocked_radius_cells=self.blocked_radii(sem_map.resolution_m),
-                                 agent_heading=sem_map.agent_heading)
+        return extract_frontiers(
+            sem_map.explored,
+            obstacle,
+            sem_map.agent_cell,
+            field_,
+            sem_map.categories,
+            sem_map.category_names,
+            self.config.frontiers,
+            resolution_m=sem_map.resolution_m,
+            blocked=np.array(self.blocked, dtype=np.int64).reshape(-1, 2),
+            blocked_radius_cells=self.blocked_radii(sem_map.resolution_m),
+            agent_heading=sem_map.agent_heading,
+        )
 
     def blocked_radii(self, resolution_m: float) -> np.ndarray:
         """Cells around each done goal where frontiers are dropped: ``blocked_radius_m``, halved for a
@@ -178,6 +191,16 @@ class ExplorationGoals:
 def _with_language(frontiers: list[Frontier], sel: Selection) -> list[Frontier]:
     """The frontiers as the decision shows them: each with its language scores, the chosen one with
     the policy's reason."""
-    return [replace(f, queries=ls.queries, llm_scores=ls.llm_scores, s_llm=ls.s_llm, fused=ls.fused,
-                    expected_m=ls.expected_m, fusion=sel.fusion, reason=sel.reason if k == sel.frontier else f.reason)
-            for k, (f, ls) in enumerate(zip(frontiers, sel.language))]
+    return [
+        replace(
+            f,
+            queries=ls.queries,
+            llm_scores=ls.llm_scores,
+            s_llm=ls.s_llm,
+            fused=ls.fused,
+            expected_m=ls.expected_m,
+            fusion=sel.fusion,
+            reason=sel.reason if k == sel.frontier else f.reason,
+        )
+        for k, (f, ls) in enumerate(zip(frontiers, sel.language))
+    ]

@@ -37,8 +37,7 @@ from l3mvn.core.types import Action, EpisodeBrief, Observation, Pose
 class MapAgent:
     """A policy for ``EpisodeSession``: ``reset(episode)``, ``act(obs) -> Decision``."""
 
-    def __init__(self, global_policy: GlobalPolicy, categories: tuple[str, ...], config: Config,
-                 seed: int = 0) -> None:
+    def __init__(self, global_policy: GlobalPolicy, categories: tuple[str, ...], config: Config, seed: int = 0) -> None:
         """``config``: the whole tree (the agent reads its sim, task, map, frontiers, planner, agent and
         policy sections; ``Config`` has checked them against each other)."""
         self.config, self.cfg = config, config.agent
@@ -99,9 +98,16 @@ class MapAgent:
             last_move = math.hypot(obs.pose.x - self._prev_pose.x, obs.pose.y - self._prev_pose.y)
         if self.wayfinder.escape.active:
             self._steps += 1
-            return self._decide(obs, sem_map, self.wayfinder.escape.next(), Pursuit(
-                self.explore.cell, GoalKind.ESCAPE, "escaping: cleared collision marks, random turn then forward"),
-                t0, mapping_ms)
+            return self._decide(
+                obs,
+                sem_map,
+                self.wayfinder.escape.next(),
+                Pursuit(
+                    self.explore.cell, GoalKind.ESCAPE, "escaping: cleared collision marks, random turn then forward"
+                ),
+                t0,
+                mapping_ms,
+            )
         target, confirmed = self.target.mask(sem_map, self.goal)
         self.target.observe(target, confirmed, self._far_sighting(sem_map) if target is None else None)
         step = Step(sem_map, self.goal, target, confirmed, last_move, self._steps, self.rng)
@@ -116,17 +122,25 @@ class MapAgent:
         action, reason = self._settle(step, pursuit)
         self.explore.tick()
         self._steps += 1
-        return self._decide(obs, sem_map, action, Pursuit(pursuit.goal, pursuit.kind, reason, pursuit.plan,
-                                                          override=pursuit.override), t0, mapping_ms,
-                            {"planning": planning_ms, "frontiers": step.frontiers_ms, "policy": step.policy_ms})
+        return self._decide(
+            obs,
+            sem_map,
+            action,
+            Pursuit(pursuit.goal, pursuit.kind, reason, pursuit.plan, override=pursuit.override),
+            t0,
+            mapping_ms,
+            {"planning": planning_ms, "frontiers": step.frontiers_ms, "policy": step.policy_ms},
+        )
 
     def _with_marks(self, p: Pursuit) -> Pursuit:
         """The reason says when the planner's collision marks changed under this step."""
         plan, reason, detour = p.plan, p.reason, self.config.planner.target_mark_detour_m
         assert plan is not None
         if plan.marked_beside:
-            reason = (f"{reason}; collision marked beside the mapped obstacle it ran into: across the way "
-                      f"it lengthened it by over {detour:g} m")
+            reason = (
+                f"{reason}; collision marked beside the mapped obstacle it ran into: across the way "
+                f"it lengthened it by over {detour:g} m"
+            )
         if plan.marks_cleared:
             reason = f"{reason}; collision marks cleared: they lengthened the way by over {detour:g} m"
         return Pursuit(p.goal, p.kind, reason, plan, override=p.override)
@@ -157,21 +171,47 @@ class MapAgent:
             return None
         frame = self.perception.frame
         assert frame is not None
-        return self.target.far_sighting(sem_map, frame.depth, frame.semantic, self.categories.index(self.goal) + 1,
-                                        frame.intrinsics.focal_px, self.sim.max_depth_m, self.explore.blocked)
+        return self.target.far_sighting(
+            sem_map,
+            frame.depth,
+            frame.semantic,
+            self.categories.index(self.goal) + 1,
+            frame.intrinsics.focal_px,
+            self.sim.max_depth_m,
+            self.explore.blocked,
+        )
 
-    def _decide(self, obs: Observation, sem_map: SemanticMap, action: Action, p: Pursuit, t0: float,
-                mapping_ms: float, stage_ms: dict[str, float] | None = None) -> Decision:
+    def _decide(
+        self,
+        obs: Observation,
+        sem_map: SemanticMap,
+        action: Action,
+        p: Pursuit,
+        t0: float,
+        mapping_ms: float,
+        stage_ms: dict[str, float] | None = None,
+    ) -> Decision:
         self._prev_pose, self._prev_action = obs.pose, action
-        timings = {"mapping": mapping_ms, "planning": 0.0, "total": (time.perf_counter() - t0) * 1e3,
-                   **(stage_ms or {})}
+        timings = {
+            "mapping": mapping_ms,
+            "planning": 0.0,
+            "total": (time.perf_counter() - t0) * 1e3,
+            **(stage_ms or {}),
+        }
         goal = p.goal
         explore = self.explore
         return Decision(
-            action=action, reason=p.reason, map=sem_map, frontiers=explore.frontiers,
+            action=action,
+            reason=p.reason,
+            map=sem_map,
+            frontiers=explore.frontiers,
             long_term_goal=goal if isinstance(goal, tuple) or goal is None else mask_centre(goal),
-            goal_kind=p.kind, chosen_frontier=explore.frontier if p.kind == GoalKind.FRONTIER else None,
-            short_term_goal=None if p.plan is None else p.plan.short_term_goal, override=p.override,
-            target_seen=p.kind == GoalKind.TARGET, stuck=self._stuck, timings_ms=timings,
+            goal_kind=p.kind,
+            chosen_frontier=explore.frontier if p.kind == GoalKind.FRONTIER else None,
+            short_term_goal=None if p.plan is None else p.plan.short_term_goal,
+            override=p.override,
+            target_seen=p.kind == GoalKind.TARGET,
+            stuck=self._stuck,
+            timings_ms=timings,
             collision_marks=self.planner.collision_cells,
         )

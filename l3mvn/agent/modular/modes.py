@@ -116,8 +116,13 @@ class ManualMode(GoalMode):
     def pursue(self, step: Step) -> Pursuit:
         cell = self.cell
         assert cell is not None
-        return Pursuit(cell, GoalKind.MANUAL, f"manual goal {cell} set in the dashboard",
-                       self._plan(step, cell, GoalKind.MANUAL, step.last_move), override=f"manual:{cell[0]},{cell[1]}")
+        return Pursuit(
+            cell,
+            GoalKind.MANUAL,
+            f"manual goal {cell} set in the dashboard",
+            self._plan(step, cell, GoalKind.MANUAL, step.last_move),
+            override=f"manual:{cell[0]},{cell[1]}",
+        )
 
     def arrived(self, step: Step, p: Pursuit) -> str:
         self.cell = None
@@ -135,21 +140,28 @@ class TargetMode(GoalMode):
 
     def pursue(self, step: Step) -> Pursuit:
         assert step.target is not None
-        return Pursuit(step.target, GoalKind.TARGET, f"{step.goal} seen: heading to it",
-                       self._plan(step, step.target, GoalKind.TARGET, step.last_move))
+        return Pursuit(
+            step.target,
+            GoalKind.TARGET,
+            f"{step.goal} seen: heading to it",
+            self._plan(step, step.target, GoalKind.TARGET, step.last_move),
+        )
 
     def settle(self, step: Step, p: Pursuit) -> tuple[Action, str] | None:
         plan, target = p.plan, p.goal
         assert plan is not None and isinstance(target, np.ndarray)
         if plan.reached:
             return Action.STOP, f"{step.goal} {straight_m(step.sem_map, target):.2f} m away: stop"
-        if (not plan.reachable or plan.stuck) and (near := straight_m(step.sem_map, target)) \
-                <= self.cfg.blocked_stop_distance_m:
+        if (not plan.reachable or plan.stuck) and (
+            near := straight_m(step.sem_map, target)
+        ) <= self.cfg.blocked_stop_distance_m:
             # Seen over a counter or through a gap the map closes, or the floor ends short of it:
             # as near as the free space allows.
             return Action.STOP, f"{step.goal} {near:.2f} m away (no path closer): stop"
-        if self.wayfinder.unreachable >= self.cfg.escape_after_unreachable \
-                and self.search.escapes >= self.cfg.target_escapes:
+        if (
+            self.wayfinder.unreachable >= self.cfg.escape_after_unreachable
+            and self.search.escapes >= self.cfg.target_escapes
+        ):
             return plan.action, _set_aside_unreachable(self, step, target)
         return None
 
@@ -171,8 +183,10 @@ class CandidateMode(GoalMode):
         target = step.target
         assert target is not None
         reason = f"{int(target.sum())} {step.goal} cell(s) seen: too few to stop, going closer to confirm"
-        return self.look_closer(step, Pursuit(target, GoalKind.CANDIDATE, reason,
-                                              self._plan(step, target, GoalKind.CANDIDATE, step.last_move)))
+        return self.look_closer(
+            step,
+            Pursuit(target, GoalKind.CANDIDATE, reason, self._plan(step, target, GoalKind.CANDIDATE, step.last_move)),
+        )
 
     def look_closer(self, step: Step, p: Pursuit) -> Pursuit:
         """Up close: face the cells, else look from another side. No nearer for the patience: look
@@ -182,7 +196,9 @@ class CandidateMode(GoalMode):
         if plan.reached:
             turn = wayfinder.turn_towards(step.sem_map, mask_centre(target))
             if turn is not None:
-                return replace(p, plan=replace(plan, action=turn, reached=False), reason=f"{p.reason}; turning to look at it")
+                return replace(
+                    p, plan=replace(plan, action=turn, reached=False), reason=f"{p.reason}; turning to look at it"
+                )
             if (view := wayfinder.other_side(step.sem_map, target)) is not None:
                 reason = f"{int(target.sum())} {step.goal} cell(s) still too few up close: looking from another side"
                 return Pursuit(view, GoalKind.VIEWPOINT, reason, self._plan(step, view, GoalKind.VIEWPOINT, None))
@@ -190,12 +206,19 @@ class CandidateMode(GoalMode):
         if wayfinder.stalled(mask_centre(target), plan):
             patience = self.cfg.goal_patience_steps
             if (view := wayfinder.other_side(step.sem_map, target)) is not None:
-                return Pursuit(view, GoalKind.VIEWPOINT, f"{p.reason}; no nearer in {patience} steps: looking from "
-                               "another side", self._plan(step, view, GoalKind.VIEWPOINT, None))
+                return Pursuit(
+                    view,
+                    GoalKind.VIEWPOINT,
+                    f"{p.reason}; no nearer in {patience} steps: looking from another side",
+                    self._plan(step, view, GoalKind.VIEWPOINT, None),
+                )
             self.search.set_aside(target)
             self.explore.force()
-            return replace(p, reason=f"{step.goal} cells no nearer in {patience} steps from "
-                                     f"{len(self.search.views) + 1} views: set aside")
+            return replace(
+                p,
+                reason=f"{step.goal} cells no nearer in {patience} steps from "
+                f"{len(self.search.views) + 1} views: set aside",
+            )
         return p
 
     def settle(self, step: Step, p: Pursuit) -> tuple[Action, str] | None:
@@ -224,8 +247,10 @@ class ViewpointMode(GoalMode):
     def pursue(self, step: Step) -> Pursuit:
         target, view, wayfinder = step.target, self.search.viewpoint, self.wayfinder
         assert target is not None and view is not None
-        reason = (f"{int(target.sum())} {step.goal} cell(s) seen, still too few up close: looking from another "
-                  f"side ({len(self.search.views)} of {self.cfg.candidate_views})")
+        reason = (
+            f"{int(target.sum())} {step.goal} cell(s) seen, still too few up close: looking from another "
+            f"side ({len(self.search.views)} of {self.cfg.candidate_views})"
+        )
         plan = self._plan(step, view, GoalKind.VIEWPOINT, step.last_move)
         if wayfinder.done_with(view, plan):
             turn = wayfinder.turn_towards(step.sem_map, mask_centre(target))
@@ -291,7 +316,9 @@ class ExploreMode(GoalMode):
         beyond = unknown_near(step.sem_map, goal, explore.blocked_radius_cells(step.sem_map.resolution_m) / 2)
         turn = self.wayfinder.turn_towards(step.sem_map, goal if beyond is None else beyond)
         if turn is not None:
-            return replace(p, plan=replace(plan, action=turn, reached=False), reason=f"{p.reason}; turning to look at it")
+            return replace(
+                p, plan=replace(plan, action=turn, reached=False), reason=f"{p.reason}; turning to look at it"
+            )
         if p.kind == GoalKind.FRONTIER and beyond is not None and explore.pressing != goal:
             explore.pressing = goal
             pressed = self._plan(step, goal, p.kind, step.last_move)
@@ -306,7 +333,9 @@ class ExploreMode(GoalMode):
     def _current(self, step: Step, last_move: float | None) -> Pursuit:
         explore = self.explore
         assert explore.cell is not None
-        return Pursuit(explore.cell, explore.kind, explore.reason, self._plan(step, explore.cell, explore.kind, last_move))
+        return Pursuit(
+            explore.cell, explore.kind, explore.reason, self._plan(step, explore.cell, explore.kind, last_move)
+        )
 
 
 class GlimpseMode(GoalMode):
@@ -315,8 +344,14 @@ class GlimpseMode(GoalMode):
 
     kinds = frozenset({GoalKind.GLIMPSE})
 
-    def __init__(self, config: Config, wayfinder: Wayfinder, search: TargetSearch, explore: ExplorationGoals,
-                 exploring: ExploreMode) -> None:
+    def __init__(
+        self,
+        config: Config,
+        wayfinder: Wayfinder,
+        search: TargetSearch,
+        explore: ExplorationGoals,
+        exploring: ExploreMode,
+    ) -> None:
         super().__init__(config, wayfinder, search, explore)
         self.exploring = exploring
 
@@ -333,8 +368,10 @@ class GlimpseMode(GoalMode):
             step.reselect(self.explore)
             explore = self.explore
             assert explore.cell is not None
-            return self.exploring.walk_on(step, Pursuit(explore.cell, explore.kind, explore.reason,
-                                                        self._plan(step, explore.cell, explore.kind, None)))
+            return self.exploring.walk_on(
+                step,
+                Pursuit(explore.cell, explore.kind, explore.reason, self._plan(step, explore.cell, explore.kind, None)),
+            )
         return Pursuit(glimpse, GoalKind.GLIMPSE, f"{step.goal} seen beyond the depth range: walking towards it", plan)
 
 
@@ -351,6 +388,12 @@ def goal_modes(config: Config, wayfinder: Wayfinder, search: TargetSearch, explo
     """Every mode, in the order the agent asks them which wants the step."""
     parts = (config, wayfinder, search, explore)
     exploring = ExploreMode(*parts)
-    return [ManualMode(*parts), TargetMode(*parts), ViewpointMode(*parts), CandidateMode(*parts),
-            LookAroundMode(*parts), GlimpseMode(*parts, exploring), exploring]
-
+    return [
+        ManualMode(*parts),
+        TargetMode(*parts),
+        ViewpointMode(*parts),
+        CandidateMode(*parts),
+        LookAroundMode(*parts),
+        GlimpseMode(*parts, exploring),
+        exploring,
+    ]

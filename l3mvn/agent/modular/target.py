@@ -12,10 +12,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from l3mvn.core.config import AgentConfig
 from l3mvn.agent.looking import far_sighting, pick_viewpoint
 from l3mvn.agent.mapping import SemanticMap
 from l3mvn.agent.planning import LocalPlanner
+from l3mvn.core.config import AgentConfig
 
 Cell = tuple[int, int]
 
@@ -75,19 +75,36 @@ class TargetSearch:
         """Another pose to look at a candidate from (``looking.pick_viewpoint``); the view from here is
         remembered so the next one differs from it too."""
         res = sem_map.resolution_m
-        found = pick_viewpoint(sem_map, target, planner, self.views, self.cfg.viewpoint_min_m / res,
-                               self.cfg.viewpoint_max_m / res)
+        found = pick_viewpoint(
+            sem_map, target, planner, self.views, self.cfg.viewpoint_min_m / res, self.cfg.viewpoint_max_m / res
+        )
         if found is None:
             return None
         self.views.append(found[1])
         self.viewpoint = found[0]
         return found[0]
 
-    def far_sighting(self, sem_map: SemanticMap, depth: np.ndarray, semantic: np.ndarray, goal_id: int,
-                     focal_px: float, max_depth_m: float, done: list[Cell]) -> Cell | None:
+    def far_sighting(
+        self,
+        sem_map: SemanticMap,
+        depth: np.ndarray,
+        semantic: np.ndarray,
+        goal_id: int,
+        focal_px: float,
+        max_depth_m: float,
+        done: list[Cell],
+    ) -> Cell | None:
         """Where a sighting of the goal (semantic id ``goal_id``) beyond the depth range points, away
         from the ``done`` goals; None when there is none."""
         res = sem_map.resolution_m
-        return far_sighting(sem_map, depth, semantic, goal_id, focal_px, max_depth_m / res,
-                            (self.cfg.glimpse_min_fraction, self.cfg.glimpse_max_fraction), done,
-                            self.cfg.blocked_radius_m / res)
+        return far_sighting(
+            sem_map,
+            depth,
+            semantic,
+            goal_id,
+            focal_px,
+            max_depth_m / res,
+            (self.cfg.glimpse_min_fraction, self.cfg.glimpse_max_fraction),
+            done,
+            self.cfg.blocked_radius_m / res,
+        )

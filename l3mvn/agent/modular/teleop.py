@@ -22,8 +22,7 @@ from l3mvn.core.types import Action, Observation
 class TeleopAgent(MapAgent):
     """``MapAgent`` whose next action is the one last given to ``drive``; it never acts on its own."""
 
-    def __init__(self, global_policy: GlobalPolicy, categories: tuple[str, ...], config: Config,
-                 seed: int = 0) -> None:
+    def __init__(self, global_policy: GlobalPolicy, categories: tuple[str, ...], config: Config, seed: int = 0) -> None:
         super().__init__(global_policy, categories, config, seed)
         self._driven: Action | None = None
 
@@ -33,11 +32,15 @@ class TeleopAgent(MapAgent):
 
     def act(self, obs: Observation) -> Decision:
         if self._driven is None:
-            raise L3MVNError("policy 'teleop' acts only when driven: use the Drive keys or buttons of "
-                             "`l3mvn serve --policy teleop`")
+            raise L3MVNError(
+                "policy 'teleop' acts only when driven: use the Drive keys or buttons of `l3mvn serve --policy teleop`"
+            )
         action, self._driven = self._driven, None
         decision = super().act(obs)
         self._prev_action = action  # what moved the agent: the next step's collision check compares with it
-        return replace(decision, action=action,
-                       reason=f"driven by hand: {action.name.lower()} (the agent would {decision.action.name.lower()}: "
-                              f"{decision.reason})")
+        return replace(
+            decision,
+            action=action,
+            reason=f"driven by hand: {action.name.lower()} (the agent would {decision.action.name.lower()}: "
+            f"{decision.reason})",
+        )

@@ -79,8 +79,7 @@ class Wayfinder:
     """Plans this step's way to the goal under the rules of its kind (``plan``), and keeps the state
     that outlives one goal mode's step: progress, the unreachable count, the escape."""
 
-    def __init__(self, config: Config, planner: LocalPlanner, search: TargetSearch,
-                 explore: ExplorationGoals) -> None:
+    def __init__(self, config: Config, planner: LocalPlanner, search: TargetSearch, explore: ExplorationGoals) -> None:
         self.config, self.cfg = config, config.agent
         self.planner = planner
         self.search, self.explore = search, explore
@@ -110,9 +109,16 @@ class Wayfinder:
             radius, dilation = self.cfg.frontier_reached_m, self.cfg.explore_goal_dilation_m
             if kind == GoalKind.FRONTIER and goal == self.explore.pressing:
                 radius = self.cfg.frontier_press_m
-        return self.planner.plan(sem_map.obstacle, sem_map.agent_cell, sem_map.agent_heading, goal,
-                                 last_move_m=last_move, goal_reached_radius_m=radius,
-                                 goal_dilation_m=dilation, target=kind in (GoalKind.TARGET, GoalKind.CANDIDATE))
+        return self.planner.plan(
+            sem_map.obstacle,
+            sem_map.agent_cell,
+            sem_map.agent_heading,
+            goal,
+            last_move_m=last_move,
+            goal_reached_radius_m=radius,
+            goal_dilation_m=dilation,
+            target=kind in (GoalKind.TARGET, GoalKind.CANDIDATE),
+        )
 
     def stalled(self, goal: Cell, plan: Plan) -> bool:
         return self.progress.stalled(goal, plan.distance_to_goal_m)

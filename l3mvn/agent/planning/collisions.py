@@ -27,8 +27,7 @@ from l3mvn.core.errors import L3MVNError
 class CollisionTracker:
     """The collision marks and motion history of one episode on one map."""
 
-    def __init__(self, cfg: PlannerConfig, resolution_m: float, *, body_radius_m: float,
-                 forward_step_m: float) -> None:
+    def __init__(self, cfg: PlannerConfig, resolution_m: float, *, body_radius_m: float, forward_step_m: float) -> None:
         """``body_radius_m``, ``forward_step_m``: the agent's, for the region a forward step sweeps."""
         if not (body_radius_m >= 0 and forward_step_m > 0):
             raise L3MVNError(f"need body_radius_m >= 0 and forward_step_m > 0, got {body_radius_m}, {forward_step_m}")
@@ -63,8 +62,15 @@ class CollisionTracker:
             self.map.fill(False)
         self._cells = np.zeros((0, 2), dtype=np.int32)
 
-    def record(self, agent: tuple[int, int], heading: float, last_move_m: float | None, *,
-               target: bool = False, obstacle: np.ndarray | None = None) -> bool:
+    def record(
+        self,
+        agent: tuple[int, int],
+        heading: float,
+        last_move_m: float | None,
+        *,
+        target: bool = False,
+        obstacle: np.ndarray | None = None,
+    ) -> bool:
         """Mark the cells ahead as blocked when a forward step moved less than the threshold; with
         ``target`` (approaching the goal object) the narrower target widths apply. With the agent's
         ``obstacle`` map, the first failed step of a run also keeps the cells beside the obstacle
@@ -78,8 +84,11 @@ class CollisionTracker:
             collided = last_move_m < cfg.collision_threshold_m
             self._consecutive_collisions = self._consecutive_collisions + 1 if collided else 0
         if collided:
-            first, widest = ((cfg.collision_mark_target_width_cells, cfg.collision_mark_target_max_width_cells)
-                             if target else (cfg.collision_mark_width_cells, cfg.collision_mark_max_width_cells))
+            first, widest = (
+                (cfg.collision_mark_target_width_cells, cfg.collision_mark_target_max_width_cells)
+                if target
+                else (cfg.collision_mark_width_cells, cfg.collision_mark_max_width_cells)
+            )
             width = min(first + 2 * (self._consecutive_collisions - 1), widest)
             self._mark(*self._ahead(agent, heading, width))
             if obstacle is not None and self._consecutive_collisions == 1:
@@ -132,14 +141,15 @@ class CollisionTracker:
         ok &= (rows != agent[0]) | (cols != agent[1])
         return rows[ok], cols[ok]
 
-    def _beside_what_was_hit(self, obstacle: np.ndarray, agent: tuple[int, int],
-                             heading: float) -> tuple[np.ndarray, np.ndarray] | None:
+    def _beside_what_was_hit(
+        self, obstacle: np.ndarray, agent: tuple[int, int], heading: float
+    ) -> tuple[np.ndarray, np.ndarray] | None:
         """The free cells the step swept (the body's disk moved one step ahead, the half in front of
         its centre) next to the obstacle cells it swept and would have come nearer to than it stands
         to any obstacle now; None when there are none. A wall alongside is no nearer a step on, so a
         step that failed beside one hit something the map does not show."""
         reach = int(math.ceil(self._body_cells + self._step_cells))
-        dr, dc = np.mgrid[-reach:reach + 1, -reach:reach + 1]
+        dr, dc = np.mgrid[-reach : reach + 1, -reach : reach + 1]
         rows, cols = dr.ravel() + agent[0], dc.ravel() + agent[1]
         shape = obstacle.shape
         inside = (rows >= 0) & (rows < shape[0]) & (cols >= 0) & (cols < shape[1])
@@ -157,7 +167,8 @@ class CollisionTracker:
             return None
         free = ~blocked & swept & ((rows != agent[0]) | (cols != agent[1]))
         near = (np.abs(rows[free][:, None] - rows[hit][None, :]) <= 1) & (
-            np.abs(cols[free][:, None] - cols[hit][None, :]) <= 1)
+            np.abs(cols[free][:, None] - cols[hit][None, :]) <= 1
+        )
         keep = near.any(axis=1)
         return (rows[free][keep], cols[free][keep]) if keep.any() else None
 

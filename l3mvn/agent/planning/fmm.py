@@ -33,11 +33,11 @@ class Window:
             raise L3MVNError(f"empty window rows [{self.r0}, {self.r1}) cols [{self.c0}, {self.c1})")
 
     @staticmethod
-    def full(shape: tuple[int, int]) -> "Window":
+    def full(shape: tuple[int, int]) -> Window:
         return Window(0, 0, int(shape[0]), int(shape[1]))
 
     @staticmethod
-    def bounding(rows: np.ndarray, cols: np.ndarray, margin: int, shape: tuple[int, int]) -> "Window":
+    def bounding(rows: np.ndarray, cols: np.ndarray, margin: int, shape: tuple[int, int]) -> Window:
         """Bounding box of the given cells grown by ``margin`` cells, clipped to the map."""
         rows, cols = np.asarray(rows), np.asarray(cols)
         if rows.size == 0:
@@ -57,7 +57,7 @@ class Window:
     def shape(self) -> tuple[int, int]:
         return self.r1 - self.r0, self.c1 - self.c0
 
-    def grown(self, margin: int, shape: tuple[int, int]) -> "Window":
+    def grown(self, margin: int, shape: tuple[int, int]) -> Window:
         return Window(
             max(self.r0 - margin, 0),
             max(self.c0 - margin, 0),
@@ -65,15 +65,11 @@ class Window:
             min(self.c1 + margin, int(shape[1])),
         )
 
-    def union(self, other: "Window") -> "Window":
-        return Window(
-            min(self.r0, other.r0), min(self.c0, other.c0), max(self.r1, other.r1), max(self.c1, other.c1)
-        )
+    def union(self, other: Window) -> Window:
+        return Window(min(self.r0, other.r0), min(self.c0, other.c0), max(self.r1, other.r1), max(self.c1, other.c1))
 
-    def contains(self, other: "Window") -> bool:
-        return (
-            self.r0 <= other.r0 and self.c0 <= other.c0 and other.r1 <= self.r1 and other.c1 <= self.c1
-        )
+    def contains(self, other: Window) -> bool:
+        return self.r0 <= other.r0 and self.c0 <= other.c0 and other.r1 <= self.r1 and other.c1 <= self.c1
 
     @overload
     def inside(self, rows: int, cols: int) -> bool: ...

@@ -21,12 +21,12 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from l3mvn.core.config import PlannerConfig
-from l3mvn.core.errors import L3MVNError
-from l3mvn.core.grid import disk
 from l3mvn.agent.planning.collisions import CollisionTracker
 from l3mvn.agent.planning.fmm import GeodesicField, Window, distance_field
 from l3mvn.agent.planning.steering import TIE_WEIGHT, Steering
+from l3mvn.core.config import PlannerConfig
+from l3mvn.core.errors import L3MVNError
+from l3mvn.core.grid import disk
 
 # FMM is a first/second-order scheme: its distances differ from the true geodesic by a few
 # percent, so every comparison between an FMM value and a straight-line bound gets this slack.
@@ -53,8 +53,9 @@ class GoalFields:
     """The field to the current goal (cached) and the agent's own distance fields, over the
     traversible map of one episode. ``fmm_runs`` counts the marches (for speed reports)."""
 
-    def __init__(self, cfg: PlannerConfig, resolution_m: float, steering: Steering,
-                 collisions: CollisionTracker) -> None:
+    def __init__(
+        self, cfg: PlannerConfig, resolution_m: float, steering: Steering, collisions: CollisionTracker
+    ) -> None:
         self.cfg, self.resolution_m = cfg, resolution_m
         self.steering = steering
         self.lookahead_cells = steering.lookahead_cells
@@ -140,8 +141,9 @@ class GoalFields:
             field, trav, stg = reused
             return field, trav, stg, False
         escape = not self._base_free(obstacle, agent, marks, wide)
-        field, trav, sources = self._goal_field(obstacle, agent, goal_rows, goal_cols, nearest_goal, escape, dilation,
-                                                marks, wide)
+        field, trav, sources = self._goal_field(
+            obstacle, agent, goal_rows, goal_cols, nearest_goal, escape, dilation, marks, wide
+        )
         if marks and not escape:
             self._cache[wide] = _GoalField(key, trav, sources, field)
         return field, trav, None, True
@@ -181,8 +183,9 @@ class GoalFields:
         limit = math.inf if max_distance_m is None else float(max_distance_m)
         return GeodesicField(values, window, obstacle.shape, limit)
 
-    def _traversible(self, obstacle: np.ndarray, window: Window, marks: bool = True,
-                     wide: bool = False) -> npt.NDArray[np.bool_]:
+    def _traversible(
+        self, obstacle: np.ndarray, window: Window, marks: bool = True, wide: bool = False
+    ) -> npt.NDArray[np.bool_]:
         """Not (dilated obstacle) and, with ``marks``, not collision, over ``window`` (obstacles just
         outside count); ``wide``: grown by the clearance too."""
         pad = window.grown(self._growth[wide], obstacle.shape)
@@ -430,9 +433,7 @@ def _target_extent(targets: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndar
             return np.empty(0, np.int64), np.empty(0, np.int64)
         return np.array(extent[:2]), np.array(extent[2:])
     if targets.ndim != 2 or targets.shape[1] != 2 or not np.issubdtype(targets.dtype, np.integer):
-        raise L3MVNError(
-            f"targets must be an (N, 2) int array of cells or a bool map mask, got {targets.shape}"
-        )
+        raise L3MVNError(f"targets must be an (N, 2) int array of cells or a bool map mask, got {targets.shape}")
     return targets[:, 0], targets[:, 1]
 
 

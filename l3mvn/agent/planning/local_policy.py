@@ -15,12 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from l3mvn.core.config import PlannerConfig, SimConfig
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.planning.collisions import CollisionTracker
 from l3mvn.agent.planning.fmm import GeodesicField
 from l3mvn.agent.planning.goal_field import GoalFields, mask_cells
 from l3mvn.agent.planning.steering import Steering
+from l3mvn.core.config import PlannerConfig, SimConfig
+from l3mvn.core.errors import L3MVNError
 from l3mvn.core.types import Action
 
 
@@ -60,8 +60,7 @@ class LocalPlanner:
     ``reset`` between episodes. ``fmm_runs`` counts the marches so far (for speed reports).
     """
 
-    def __init__(self, cfg: PlannerConfig, resolution_m: float, *, body_radius_m: float,
-                 forward_step_m: float) -> None:
+    def __init__(self, cfg: PlannerConfig, resolution_m: float, *, body_radius_m: float, forward_step_m: float) -> None:
         """``resolution_m``: the cell size of the maps it will plan on (the agent's map);
         ``body_radius_m``, ``forward_step_m``: the agent's, to tell what a failed step ran into."""
         if not (math.isfinite(resolution_m) and resolution_m > 0):
@@ -76,7 +75,7 @@ class LocalPlanner:
         self._target_clears = 0  # clears of detour-making marks this episode (``target_mark_clears``)
 
     @classmethod
-    def for_sim(cls, cfg: PlannerConfig, resolution_m: float, sim: SimConfig) -> "LocalPlanner":
+    def for_sim(cls, cfg: PlannerConfig, resolution_m: float, sim: SimConfig) -> LocalPlanner:
         """A planner for the simulated robot's body and step, on maps of ``resolution_m`` cells."""
         return cls(cfg, resolution_m, body_radius_m=sim.agent_radius_m, forward_step_m=sim.forward_step_m)
 
@@ -141,8 +140,9 @@ class LocalPlanner:
         collided = self._collisions.record(agent, heading, last_move_m, target=target, obstacle=obstacle)
 
         nearest_goal = _nearest(agent, goal_rows, goal_cols)
-        field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols, nearest_goal,
-                                                            dilation)
+        field, trav, stg, replanned = self._fields.field_to(
+            obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation
+        )
         d_agent = float(field.at(*agent))
         # Only a replanned field can hold new marks across the way (a reused one provably does not).
         replan = (obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation)
@@ -161,8 +161,12 @@ class LocalPlanner:
                 self._collisions.swap_last_mark(*across)
                 self._fields.restore(kept)
                 field, trav, stg, replanned, d_agent = plan_across
-        marks_cleared = (target and replanned and self._target_clears < self.cfg.target_mark_clears
-                         and self._marks_make_detour(*replan, d_agent))
+        marks_cleared = (
+            target
+            and replanned
+            and self._target_clears < self.cfg.target_mark_clears
+            and self._marks_make_detour(*replan, d_agent)
+        )
         if marks_cleared:
             self._collisions.clear_marks()
             self._target_clears += 1
@@ -193,24 +197,38 @@ class LocalPlanner:
         )
 
     def _field_anew(
-        self, obstacle: np.ndarray, agent: tuple[int, int], goal_rows: np.ndarray, goal_cols: np.ndarray,
-        nearest_goal: tuple[int, int], dilation: int,
+        self,
+        obstacle: np.ndarray,
+        agent: tuple[int, int],
+        goal_rows: np.ndarray,
+        goal_cols: np.ndarray,
+        nearest_goal: tuple[int, int],
+        dilation: int,
     ) -> tuple[GeodesicField, np.ndarray, tuple[int, int] | None, bool, float]:
         """``field_to`` after the collision marks changed under the cached field, and the agent's distance."""
         self._fields.forget()
-        field, trav, stg, replanned = self._fields.field_to(obstacle, agent, goal_rows, goal_cols, nearest_goal,
-                                                            dilation)
+        field, trav, stg, replanned = self._fields.field_to(
+            obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation
+        )
         return field, trav, stg, replanned, float(field.at(*agent))
 
     def _marks_make_detour(
-        self, obstacle: np.ndarray, agent: tuple[int, int], goal_rows: np.ndarray, goal_cols: np.ndarray,
-        nearest_goal: tuple[int, int], dilation: int, d_agent: float,
+        self,
+        obstacle: np.ndarray,
+        agent: tuple[int, int],
+        goal_rows: np.ndarray,
+        goal_cols: np.ndarray,
+        nearest_goal: tuple[int, int],
+        dilation: int,
+        d_agent: float,
     ) -> bool:
         """Whether the collision marks lengthen the way to the goal by more than
         ``target_mark_detour_m`` (or close it)."""
         if not len(self._collisions.cells):
             return False
-        free, _, _, _ = self._fields.field_to(obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, marks=False)
+        free, _, _, _ = self._fields.field_to(
+            obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, marks=False
+        )
         return float(free.at(*agent)) + self.cfg.target_mark_detour_m < d_agent
 
     def distance_from_agent(
@@ -270,8 +288,7 @@ def _goal_cells(goal: np.ndarray | tuple[int, int], shape: tuple[int, int]) -> t
         return np.array([r]), np.array([c])
     if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] == 0 or not np.issubdtype(arr.dtype, np.integer):
         raise L3MVNError(
-            "goal must be a (row, col) cell, an (N, 2) int array of cells or a bool map mask; "
-            f"got {arr.shape}"
+            f"goal must be a (row, col) cell, an (N, 2) int array of cells or a bool map mask; got {arr.shape}"
         )
     rows, cols = arr[:, 0].astype(np.int64), arr[:, 1].astype(np.int64)
     if ((rows < 0) | (rows >= shape[0]) | (cols < 0) | (cols >= shape[1])).any():

@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-from l3mvn.core.config import PlannerConfig
 from l3mvn.agent.planning.fmm import GeodesicField
+from l3mvn.core.config import PlannerConfig
 from l3mvn.core.types import Action, wrap_angle
 
 # Directions of the rays that look for the short-term goal (5 degrees apart), sampled every half
@@ -71,8 +71,9 @@ class Steering:
         threshold = math.radians(self.cfg.turn_threshold_deg)
         return target != agent and abs(_bearing_error(agent, heading, target)) <= threshold
 
-    def action(self, agent: tuple[int, int], heading: float, target: tuple[int, int], field: GeodesicField,
-               trav: np.ndarray) -> Action:
+    def action(
+        self, agent: tuple[int, int], heading: float, target: tuple[int, int], field: GeodesicField, trav: np.ndarray
+    ) -> Action:
         """Turn toward ``target`` or step; ``field`` and its traversible window ``trav`` tell whether a
         step that moved may be followed by another off the turn threshold (``_keeps_heading``)."""
         if target == agent:  # standing on the goal cell itself: any turn is harmless
@@ -80,8 +81,13 @@ class Steering:
         else:
             error = _bearing_error(agent, heading, target)
             threshold = math.radians(self.cfg.turn_threshold_deg)
-            action = (Action.TURN_LEFT if error > threshold else Action.TURN_RIGHT if error < -threshold
-                      else Action.MOVE_FORWARD)
+            action = (
+                Action.TURN_LEFT
+                if error > threshold
+                else Action.TURN_RIGHT
+                if error < -threshold
+                else Action.MOVE_FORWARD
+            )
             if action != Action.MOVE_FORWARD and self._keeps_heading(agent, heading, error, field, trav):
                 action = Action.MOVE_FORWARD
             # A turn straight back on the same cell undoes the last one. It happens when the goal moves
@@ -93,8 +99,9 @@ class Steering:
         self._last = (agent, action)
         return action
 
-    def _keeps_heading(self, agent: tuple[int, int], heading: float, error: float, field: GeodesicField,
-                       trav: np.ndarray) -> bool:
+    def _keeps_heading(
+        self, agent: tuple[int, int], heading: float, error: float, field: GeodesicField, trav: np.ndarray
+    ) -> bool:
         """Whether the agent, having just stepped forward off its last cell, steps on rather than turn:
         the short-term goal lies within ``keep_heading_deg``, the step's cells are traversible and
         it ends nearer the goal on ``field``. A path between two headings otherwise flips the bearing

@@ -46,8 +46,9 @@ class Selection:
 class GlobalPolicy(Protocol):
     name: str
 
-    def select(self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str,
-               rng: np.random.Generator) -> Selection | None:
+    def select(
+        self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str, rng: np.random.Generator
+    ) -> Selection | None:
         """None when there is nothing to choose (no frontier)."""
 
 
@@ -62,8 +63,9 @@ class NearestFrontier:
 
     name = "frontier"
 
-    def select(self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str,
-               rng: np.random.Generator) -> Selection | None:
+    def select(
+        self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str, rng: np.random.Generator
+    ) -> Selection | None:
         if not frontiers:
             return None
         d = np.array([f.cost for f in frontiers], dtype=np.float64)
@@ -76,12 +78,15 @@ class CostUtility:
 
     name = "cost-utility"
 
-    def select(self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str,
-               rng: np.random.Generator) -> Selection | None:
+    def select(
+        self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str, rng: np.random.Generator
+    ) -> Selection | None:
         if not frontiers:
             return None
         scores = np.array([f.s_cu for f in frontiers], dtype=np.float64)
-        return _pick(frontiers, scores, "highest cost-utility (S_CU {f.s_cu:.2f}, {f.size} cells, {f.distance_m:.1f} m)")
+        return _pick(
+            frontiers, scores, "highest cost-utility (S_CU {f.s_cu:.2f}, {f.size} cells, {f.distance_m:.1f} m)"
+        )
 
 
 class RandomSample:
@@ -109,8 +114,9 @@ class RandomSample:
         self.dilation = obstacle_dilation_cells
         self._kernel = disk(obstacle_dilation_cells).astype(np.uint8)
 
-    def select(self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str,
-               rng: np.random.Generator) -> Selection | None:
+    def select(
+        self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str, rng: np.random.Generator
+    ) -> Selection | None:
         win = sem_map.local_window()
         r0, _, c0, _ = win.bounds
         walls = self._walls(win)
@@ -122,8 +128,9 @@ class RandomSample:
         unknown = reachable & ~win.explored
         # Measured around mapped walls, not through them: the unknown just behind an outer wall is
         # near the floor in a straight line, yet reached only by walking around the house.
-        near_floor = np.isfinite(distance_field(~walls, win.explored & ~walls,
-                                                resolution_m=sem_map.resolution_m, limit_m=self.band_m))
+        near_floor = np.isfinite(
+            distance_field(~walls, win.explored & ~walls, resolution_m=sem_map.resolution_m, limit_m=self.band_m)
+        )
         for candidates in (unknown & near_floor, unknown, reachable):
             cells = np.argwhere(candidates)
             if len(cells):

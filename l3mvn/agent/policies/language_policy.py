@@ -42,7 +42,6 @@ if TYPE_CHECKING:  # the language package loads its models' libraries: only on f
     from l3mvn.agent.language import Scorer
 
 
-
 LISTWISE_TEMPERATURE_M = 1.0  # the frontier head's training tau (frontier_head.train_frontier_head)
 
 
@@ -78,10 +77,17 @@ def _shared_scorer(name: str, head: str | None) -> Scorer:
 class LanguageFrontierPolicy:
     """Scores every frontier's objects with a language scorer and fuses with an exploration score."""
 
-    def __init__(self, name: str, scorer: str, exploration: str = "cost-utility", selection: str = "paper",
-                 paradigm: str = "feedforward",
-                 bound: tuple[float, float] = (PolicyConfig.bound_low, PolicyConfig.bound_high),
-                 head: str | None = None, cu_lambda: float = FrontierConfig.cu_lambda) -> None:
+    def __init__(
+        self,
+        name: str,
+        scorer: str,
+        exploration: str = "cost-utility",
+        selection: str = "paper",
+        paradigm: str = "feedforward",
+        bound: tuple[float, float] = (PolicyConfig.bound_low, PolicyConfig.bound_high),
+        head: str | None = None,
+        cu_lambda: float = FrontierConfig.cu_lambda,
+    ) -> None:
         if selection not in SELECTIONS:
             raise L3MVNError(f"unknown selection {selection!r}; valid: {', '.join(SELECTIONS)}")
         if exploration not in ("cost-utility", "nearest"):
@@ -91,22 +97,27 @@ class LanguageFrontierPolicy:
         if head is not None and scorer != HEAD_SCORER:
             raise L3MVNError(f"a head ({head!r}) applies to the {HEAD_SCORER} scorer only, not {scorer!r}")
         if selection == "expected" and not cu_lambda > 0:
-            raise L3MVNError(f"selection 'expected' needs frontiers.cu_lambda > 0 (cost-utility in metres), got {cu_lambda}")
+            raise L3MVNError(
+                f"selection 'expected' needs frontiers.cu_lambda > 0 (cost-utility in metres), got {cu_lambda}"
+            )
         self.bound, self.head, self.cu_lambda = bound, head, cu_lambda
         self.scorer = self._make(scorer)
 
     def _make(self, scorer: str) -> Scorer:
         made = shared_scorer(scorer, self.head if scorer == HEAD_SCORER else None)
         if self.selection == "expected" and not getattr(made, "predicts_distance", False):
-            raise L3MVNError(f"selection 'expected' needs a scorer that predicts distances (feedforward with "
-                             f"head 'frontiers' or 'frontiers-bag'), not {scorer!r}; valid selections for it: paper, official_code")
+            raise L3MVNError(
+                f"selection 'expected' needs a scorer that predicts distances (feedforward with "
+                f"head 'frontiers' or 'frontiers-bag'), not {scorer!r}; valid selections for it: paper, official_code"
+            )
         return made
 
     def set_scorer(self, scorer: str) -> None:
         self.scorer_name, self.scorer = scorer, self._make(scorer)
 
-    def select(self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str,
-               rng: np.random.Generator) -> Selection | None:
+    def select(
+        self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str, rng: np.random.Generator
+    ) -> Selection | None:
         if not frontiers:
             return None
         objects = [f.objects for f in frontiers]
@@ -128,24 +139,49 @@ class LanguageFrontierPolicy:
             fused = s_llm
         else:
             i, reason, fused, fusion = self._paper(frontiers, s_llm, explore)
-        expected = ([{} for _ in frontiers] if all_metres is None else
-                    [{g: round(float(m), 3) for g, m in zip(self.scorer.goals, row)} for row in all_metres])
+        expected = (
+            [{} for _ in frontiers]
+            if all_metres is None
+            else [{g: round(float(m), 3) for g, m in zip(self.scorer.goals, row)} for row in all_metres]
+        )
         language = tuple(
-            LanguageScore(queries=self.scorer.queries(objs), llm_scores={g: round(p, 4) for g, p in d.items()},
-                          s_llm=float(p), fused=float(v), expected_m=e)
+            LanguageScore(
+                queries=self.scorer.queries(objs),
+                llm_scores={g: round(p, 4) for g, p in d.items()},
+                s_llm=float(p),
+                fused=float(v),
+                expected_m=e,
+            )
             for objs, d, p, v, e in zip(objects, dists, s_llm, fused, expected)
         )
         return Selection(i, frontiers[i].center, np.asarray(fused, dtype=np.float64), reason, language, fusion)
 
-    def _fusion(self, frontiers: list[Frontier], branch: str, choice: int, s_llm: np.ndarray, explore: np.ndarray,
-                compared: np.ndarray, **numbers: Any) -> Fusion:
+    def _fusion(
+        self,
+        frontiers: list[Frontier],
+        branch: str,
+        choice: int,
+        s_llm: np.ndarray,
+        explore: np.ndarray,
+        compared: np.ndarray,
+        **numbers: Any,
+    ) -> Fusion:
         """The record of what the rule compared (the same arrays it ranked, as plain floats)."""
-        return Fusion(rule=self.selection, branch=branch, choice=choice, ids=tuple(f.id for f in frontiers),
-                      s_llm=tuple(map(float, s_llm)), explore=tuple(map(float, explore)),
-                      compared=tuple(map(float, compared)), exploration=self.exploration, **numbers)
+        return Fusion(
+            rule=self.selection,
+            branch=branch,
+            choice=choice,
+            ids=tuple(f.id for f in frontiers),
+            s_llm=tuple(map(float, s_llm)),
+            explore=tuple(map(float, explore)),
+            compared=tuple(map(float, compared)),
+            exploration=self.exploration,
+            **numbers,
+        )
 
-    def _expected(self, frontiers: list[Frontier], metres: np.ndarray, s_llm: np.ndarray,
-                  explore: np.ndarray) -> tuple[int, str, np.ndarray, Fusion]:
+    def _expected(
+        self, frontiers: list[Frontier], metres: np.ndarray, s_llm: np.ndarray, explore: np.ndarray
+    ) -> tuple[int, str, np.ndarray, Fusion]:
         """argmin of C - U / lambda + expected metres on; fused = that total min-max flipped into [0, 1]
         (1 = best), the scale the agent's commitment margin reads."""
         cost = np.array([f.cost for f in frontiers], dtype=np.float64)
@@ -154,10 +190,26 @@ class LanguageFrontierPolicy:
         i = int(np.argmin(total))
         span = total.max() - total.min()
         fused = np.ones_like(total) if span <= 0 else 1.0 - (total - total.min()) / span
-        fusion = self._fusion(frontiers, "least total", i, s_llm, explore, total, cost_m=tuple(map(float, cost)),
-                              bonus_m=tuple(map(float, bonus)), expected_m=tuple(map(float, metres)))
-        return i, (f"expected: {frontiers[i].cost:.1f} m to frontier - {frontiers[i].utility / self.cu_lambda:.1f} m "
-                   f"size bonus + {metres[i]:.1f} m expected on = {total[i]:.1f} m (least)"), fused, fusion
+        fusion = self._fusion(
+            frontiers,
+            "least total",
+            i,
+            s_llm,
+            explore,
+            total,
+            cost_m=tuple(map(float, cost)),
+            bonus_m=tuple(map(float, bonus)),
+            expected_m=tuple(map(float, metres)),
+        )
+        return (
+            i,
+            (
+                f"expected: {frontiers[i].cost:.1f} m to frontier - {frontiers[i].utility / self.cu_lambda:.1f} m "
+                f"size bonus + {metres[i]:.1f} m expected on = {total[i]:.1f} m (least)"
+            ),
+            fused,
+            fusion,
+        )
 
     def _exploration(self, frontiers: list[Frontier]) -> np.ndarray:
         if self.exploration == "cost-utility":
@@ -165,27 +217,39 @@ class LanguageFrontierPolicy:
         d = np.array([f.distance_m for f in frontiers], dtype=np.float64)
         return 1.0 - d / max(d.max(), 1e-9) if len(d) > 1 else np.ones(1)
 
-    def _paper(self, frontiers: list[Frontier], s_llm: np.ndarray,
-               explore: np.ndarray) -> tuple[int, str, np.ndarray, Fusion]:
+    def _paper(
+        self, frontiers: list[Frontier], s_llm: np.ndarray, explore: np.ndarray
+    ) -> tuple[int, str, np.ndarray, Fusion]:
         lo, hi = self.bound
         top = float(s_llm.max())
         if top > hi:
             i = int(np.argmax(s_llm))
-            return (i, f"language: S_LLM {top:.2f} > {hi} (bound)", s_llm,
-                    self._fusion(frontiers, "language", i, s_llm, explore, s_llm, bound=(lo, hi)))
+            return (
+                i,
+                f"language: S_LLM {top:.2f} > {hi} (bound)",
+                s_llm,
+                self._fusion(frontiers, "language", i, s_llm, explore, s_llm, bound=(lo, hi)),
+            )
         if top < lo:
             i = int(np.argmax(explore))
             fused = lo + explore * (hi - lo)
-            return (i, f"exploration: S_LLM {top:.2f} < {lo} (bound), best {self.exploration}", fused,
-                    self._fusion(frontiers, "exploration", i, s_llm, explore, fused, bound=(lo, hi)))
+            return (
+                i,
+                f"exploration: S_LLM {top:.2f} < {lo} (bound), best {self.exploration}",
+                fused,
+                self._fusion(frontiers, "exploration", i, s_llm, explore, fused, bound=(lo, hi)),
+            )
         fused = np.maximum(s_llm, lo + explore * (hi - lo))
         i = int(np.argmax(fused))
         why = "language" if s_llm[i] >= lo + explore[i] * (hi - lo) else "exploration"
-        return (i, f"fused ({why} wins): S_LLM {s_llm[i]:.2f}, {self.exploration} {explore[i]:.2f}", fused,
-                self._fusion(frontiers, "fused", i, s_llm, explore, fused, bound=(lo, hi)))
+        return (
+            i,
+            f"fused ({why} wins): S_LLM {s_llm[i]:.2f}, {self.exploration} {explore[i]:.2f}",
+            fused,
+            self._fusion(frontiers, "fused", i, s_llm, explore, fused, bound=(lo, hi)),
+        )
 
-    def _official(self, frontiers: list[Frontier], s_llm: np.ndarray,
-                  explore: np.ndarray) -> tuple[int, str, Fusion]:
+    def _official(self, frontiers: list[Frontier], s_llm: np.ndarray, explore: np.ndarray) -> tuple[int, str, Fusion]:
         u = np.array([f.utility for f in frontiers], dtype=np.float64)
         no_objects = np.array([not self.scorer.query_objects(f.objects) for f in frontiers])
         s = np.where(no_objects, 0.1 + 0.1 * u / max(u.max(), 1e-9), s_llm)
@@ -200,6 +264,7 @@ class LanguageFrontierPolicy:
         if self.paradigm != "feedforward":
             for i in order:
                 if s[i] > 0.1:
-                    return chose("first above 0.1", int(i),
-                                 f"official code: first by utility with S_LLM {s[i]:.2f} > 0.1")
+                    return chose(
+                        "first above 0.1", int(i), f"official code: first by utility with S_LLM {s[i]:.2f} > 0.1"
+                    )
         return chose("utility", int(order[0]), "official code: best utility")

@@ -25,9 +25,9 @@ PointDistances = Callable[[np.ndarray, np.ndarray], np.ndarray]
 def frontier_goal_distances(frontiers: list[Frontier], sem_map: SemanticMap, distances: PointDistances) -> np.ndarray:
     """The distance from each frontier (its nearest cell) to the goal, in metres: ``distances`` read at
     the world points of the frontier's cells; inf where none of them lies on the floor it knows."""
-    return np.array([
-        distances(*sem_map.cell_to_world(f.cells[:, 0], f.cells[:, 1])).min() for f in frontiers
-    ], dtype=np.float64)
+    return np.array(
+        [distances(*sem_map.cell_to_world(f.cells[:, 0], f.cells[:, 1])).min() for f in frontiers], dtype=np.float64
+    )
 
 
 class FrontierOracle:
@@ -43,8 +43,9 @@ class FrontierOracle:
     def __init__(self, distances: GoalDistances) -> None:
         self.distances = distances
 
-    def select(self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str,
-               rng: np.random.Generator) -> Selection | None:
+    def select(
+        self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str, rng: np.random.Generator
+    ) -> Selection | None:
         if not frontiers:
             return None
         cost = np.array([f.cost for f in frontiers], dtype=np.float64)
@@ -52,12 +53,20 @@ class FrontierOracle:
         if not np.isfinite(to_goal).any():
             # Frontier cells off the ground-truth floor everywhere (early, in a narrow spot): say so.
             i = int(np.argmin(cost))
-            return Selection(i, frontiers[i].center, 1.0 - cost / max(float(cost.max()), 1e-9),
-                             f"oracle: no frontier on the ground-truth floor, nearest one ({cost[i]:.1f} m)")
+            return Selection(
+                i,
+                frontiers[i].center,
+                1.0 - cost / max(float(cost.max()), 1e-9),
+                f"oracle: no frontier on the ground-truth floor, nearest one ({cost[i]:.1f} m)",
+            )
         total = cost + to_goal
         i = int(np.argmin(total))
         finite = np.where(np.isfinite(total), total, total[np.isfinite(total)].max())
         scores = 1.0 - (finite - finite.min()) / max(float(np.ptp(finite)), 1e-9)
-        return Selection(i, frontiers[i].center, scores,
-                         f"oracle: frontier {frontiers[i].id}, {cost[i]:.1f} m away, {to_goal[i]:.1f} m on to the "
-                         f"{goal} (ground truth)")
+        return Selection(
+            i,
+            frontiers[i].center,
+            scores,
+            f"oracle: frontier {frontiers[i].id}, {cost[i]:.1f} m away, {to_goal[i]:.1f} m on to the "
+            f"{goal} (ground truth)",
+        )

@@ -44,12 +44,16 @@ class Config:
         if agent.frontier_reached_m < self.frontiers.min_distance_m:
             raise L3MVNError("agent.frontier_reached_m must be >= frontiers.min_distance_m (else a dead zone)")
         if agent.blocked_stop_distance_m >= self.task.success_distance_m:
-            raise L3MVNError(f"agent.blocked_stop_distance_m ({agent.blocked_stop_distance_m} m) must be below "
-                             f"task.success_distance_m ({self.task.success_distance_m} m): a stop there never succeeds")
+            raise L3MVNError(
+                f"agent.blocked_stop_distance_m ({agent.blocked_stop_distance_m} m) must be below "
+                f"task.success_distance_m ({self.task.success_distance_m} m): a stop there never succeeds"
+            )
         if agent.look_tolerance_deg < self.sim.turn_angle_deg / 2:
-            raise L3MVNError(f"agent.look_tolerance_deg ({agent.look_tolerance_deg}) must be >= half of "
-                             f"sim.turn_angle_deg ({self.sim.turn_angle_deg / 2}): else the agent turns past its "
-                             "goal and back forever")
+            raise L3MVNError(
+                f"agent.look_tolerance_deg ({agent.look_tolerance_deg}) must be >= half of "
+                f"sim.turn_angle_deg ({self.sim.turn_angle_deg / 2}): else the agent turns past its "
+                "goal and back forever"
+            )
         if self.sim.agent_radius_m < self.map.resolution_m / 2:
             raise L3MVNError("sim.agent_radius_m must be at least half a map cell (map.resolution_m / 2)")
         cells = self.map.map_cells
@@ -57,14 +61,16 @@ class Config:
             for f in dataclasses.fields(section):
                 if f.name.endswith("_cells") and getattr(section, f.name) > cells:
                     name = f"{type(section).__name__.removesuffix('Config').lower()}.{f.name}"
-                    raise L3MVNError(f"{name} is {getattr(section, f.name)} cells, more than the whole "
-                                     f"{cells}-cell map (map.map_size_m / map.resolution_m)")
+                    raise L3MVNError(
+                        f"{name} is {getattr(section, f.name)} cells, more than the whole "
+                        f"{cells}-cell map (map.map_size_m / map.resolution_m)"
+                    )
         _check_memory(self)
 
-    def replace(self, **sections: Any) -> "Config":
+    def replace(self, **sections: Any) -> Config:
         return dataclasses.replace(self, **sections)
 
-    def with_frame(self, height: int, width: int) -> "Config":
+    def with_frame(self, height: int, width: int) -> Config:
         return self.replace(sim=self.sim.with_frame(height, width))
 
 
@@ -91,12 +97,16 @@ def _check_memory(cfg: Config) -> None:
     need_map = cells * cells * MAP_BYTES_PER_CELL
     need_frame = cfg.sim.frame_height * cfg.sim.frame_width * FRAME_BYTES_PER_PIXEL
     if need_map > have:
-        raise L3MVNError(f"map.map_size_m {cfg.map.map_size_m:g} at map.resolution_m {cfg.map.resolution_m:g} is a "
-                         f"{cells}x{cells}-cell map, about {_size(need_map)} per episode; this machine has "
-                         f"{_size(have)}: choose a coarser resolution_m or a smaller map_size_m")
+        raise L3MVNError(
+            f"map.map_size_m {cfg.map.map_size_m:g} at map.resolution_m {cfg.map.resolution_m:g} is a "
+            f"{cells}x{cells}-cell map, about {_size(need_map)} per episode; this machine has "
+            f"{_size(have)}: choose a coarser resolution_m or a smaller map_size_m"
+        )
     if need_frame > have:
-        raise L3MVNError(f"a {cfg.sim.frame_height}x{cfg.sim.frame_width} frame needs about {_size(need_frame)}; "
-                         f"this machine has {_size(have)}: choose a smaller sim.frame_height / frame_width")
+        raise L3MVNError(
+            f"a {cfg.sim.frame_height}x{cfg.sim.frame_width} frame needs about {_size(need_frame)}; "
+            f"this machine has {_size(have)}: choose a smaller sim.frame_height / frame_width"
+        )
 
 
 def _size(nbytes: float) -> str:
@@ -156,8 +166,10 @@ def _resolve(cfg: Config, name: str) -> tuple[str, str]:
         return owners[0], name
     if owners:
         raise L3MVNError(f"setting {name!r} is in several sections: write {' or '.join(f'{s}.{name}' for s in owners)}")
-    raise L3MVNError(f"unknown setting {name!r}; write section.field with a section of {', '.join(SECTIONS)} "
-                     "(`l3mvn config` lists every field)")
+    raise L3MVNError(
+        f"unknown setting {name!r}; write section.field with a section of {', '.join(SECTIONS)} "
+        "(`l3mvn config` lists every field)"
+    )
 
 
 def _parse(section_cfg: Any, key: str, raw: str, where: str) -> Any:
@@ -197,7 +209,21 @@ def number(raw: str, kind: type, where: str) -> int | float:
 
 
 __all__ = [
-    "EDGE_MODES", "SECTIONS", "SELECTIONS", "SUCCESS_RULES", "UTILITY_MODES", "AgentConfig", "Config",
-    "FrontierConfig", "MapConfig", "PlannerConfig", "PolicyConfig", "SimConfig", "TaskConfig", "config_dict",
-    "config_hash", "override", "settings",
+    "EDGE_MODES",
+    "SECTIONS",
+    "SELECTIONS",
+    "SUCCESS_RULES",
+    "UTILITY_MODES",
+    "AgentConfig",
+    "Config",
+    "FrontierConfig",
+    "MapConfig",
+    "PlannerConfig",
+    "PolicyConfig",
+    "SimConfig",
+    "TaskConfig",
+    "config_dict",
+    "config_hash",
+    "override",
+    "settings",
 ]

@@ -69,8 +69,9 @@ class AgentConfig:
 
     def __post_init__(self) -> None:
         if self.map_input_height < 1 or self.map_input_width < 1:
-            raise L3MVNError(f"map_input_height and map_input_width must be >= 1, got "
-                             f"{self.map_input_height}x{self.map_input_width}")
+            raise L3MVNError(
+                f"map_input_height and map_input_width must be >= 1, got {self.map_input_height}x{self.map_input_width}"
+            )
         if self.replan_every < 1 or self.target_min_cells < 1 or self.goal_patience_steps < 1:
             raise L3MVNError("replan_every, target_min_cells and goal_patience_steps must be >= 1")
         if not (self.commitment_radius_m > 0 and self.goal_progress_m > 0):
@@ -79,16 +80,21 @@ class AgentConfig:
             raise L3MVNError("stop distances must satisfy 0 < stop_distance_m <= blocked_stop_distance_m")
         if not 0 < self.look_tolerance_deg < 90.0:
             raise L3MVNError(f"look_tolerance_deg must lie in (0, 90), got {self.look_tolerance_deg}")
-        counts = {"look_around_steps": self.look_around_steps, "target_escapes": self.target_escapes,
-                  "max_reselect": self.max_reselect, "candidate_views": self.candidate_views}
+        counts = {
+            "look_around_steps": self.look_around_steps,
+            "target_escapes": self.target_escapes,
+            "max_reselect": self.max_reselect,
+            "candidate_views": self.candidate_views,
+        }
         if bad := {k: v for k, v in counts.items() if v < 0}:
             raise L3MVNError(f"{', '.join(bad)} must be >= 0, got {', '.join(map(str, bad.values()))}")
         if self.escape_after_unreachable < 1:
             raise L3MVNError(f"escape_after_unreachable must be >= 1, got {self.escape_after_unreachable}")
         lengths = {"blocked_radius_m": self.blocked_radius_m, "candidate_reached_m": self.candidate_reached_m}
         if nonpositive := {k: v for k, v in lengths.items() if not v > 0}:
-            raise L3MVNError(f"{', '.join(nonpositive)} must be positive, "
-                             f"got {', '.join(map(str, nonpositive.values()))}")
+            raise L3MVNError(
+                f"{', '.join(nonpositive)} must be positive, got {', '.join(map(str, nonpositive.values()))}"
+            )
         if self.look_min_area_m2 < 0 or self.commitment_margin < 0 or self.explore_goal_dilation_m < 0:
             raise L3MVNError("look_min_area_m2, commitment_margin and explore_goal_dilation_m must be >= 0")
         if not 0 < self.frontier_press_m < self.frontier_reached_m:
@@ -102,6 +108,8 @@ class AgentConfig:
         """The stride frames of this size are mapped at (SemExp: 480x640 -> 120x160 with 4)."""
         factor = max(1, height // self.map_input_height)
         if height % factor or width % factor:
-            raise L3MVNError(f"frame {height}x{width} is not divisible by the mapper's downsample factor {factor} "
-                             f"(height // {self.map_input_height}): choose e.g. 480x640 or 120x160")
+            raise L3MVNError(
+                f"frame {height}x{width} is not divisible by the mapper's downsample factor {factor} "
+                f"(height // {self.map_input_height}): choose e.g. 480x640 or 120x160"
+            )
         return factor

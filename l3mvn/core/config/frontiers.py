@@ -44,9 +44,7 @@ class FrontierConfig:
 
     def __post_init__(self) -> None:
         if self.utility not in UTILITY_MODES:
-            raise L3MVNError(
-                f"unknown frontier utility {self.utility!r}; choose one of {', '.join(UTILITY_MODES)}"
-            )
+            raise L3MVNError(f"unknown frontier utility {self.utility!r}; choose one of {', '.join(UTILITY_MODES)}")
         if self.edge not in EDGE_MODES:
             raise L3MVNError(f"unknown frontier edge {self.edge!r}; choose one of {', '.join(EDGE_MODES)}")
         if self.min_cluster_cells < 1:
@@ -66,7 +64,7 @@ class FrontierConfig:
                 raise L3MVNError(f"{name} must be a finite number >= 0, got {value}")
 
     @classmethod
-    def official_code(cls, **overrides: Any) -> "FrontierConfig":
+    def official_code(cls, **overrides: Any) -> FrontierConfig:
         """The authors' code: utility = size (+8 within 3 m), no cost term, best 4 kept."""
         settings: dict[str, Any] = {"utility": "official_code", "top_k": 4}
         settings.update(overrides)

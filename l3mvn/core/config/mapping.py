@@ -64,11 +64,11 @@ class MapConfig:
         if not self.floor_min_height_m < self.category_max_height_m:
             raise L3MVNError("height bands must satisfy floor_min_height_m < category_max_height_m")
         if not 1 <= self.category_point_threshold <= _UINT16_MAX:
-            raise L3MVNError(
-                f"category_point_threshold must lie in 1..65535, got {self.category_point_threshold}"
-            )
+            raise L3MVNError(f"category_point_threshold must lie in 1..65535, got {self.category_point_threshold}")
         if self.free_space_bins < 0:
-            raise L3MVNError(f"free_space_bins must be >= 0 (0 turns free-space carving off), got {self.free_space_bins}")
+            raise L3MVNError(
+                f"free_space_bins must be >= 0 (0 turns free-space carving off), got {self.free_space_bins}"
+            )
         if not (math.isfinite(self.look_distance_m) and self.look_distance_m > 0):
             raise L3MVNError(f"look_distance_m must be positive, got {self.look_distance_m}")
 

@@ -66,16 +66,29 @@ class PlannerConfig:
 
     def __post_init__(self) -> None:
         positive = (
-            "goal_dilation_m", "stg_lookahead_m", "turn_threshold_deg",
-            "collision_threshold_m", "collision_mark_offset_cells", "collision_mark_length_cells",
-            "collision_mark_width_cells", "collision_mark_target_width_cells",
-            "stuck_window_steps", "stuck_collisions", "window_margin_m", "target_mark_detour_m",
+            "goal_dilation_m",
+            "stg_lookahead_m",
+            "turn_threshold_deg",
+            "collision_threshold_m",
+            "collision_mark_offset_cells",
+            "collision_mark_length_cells",
+            "collision_mark_width_cells",
+            "collision_mark_target_width_cells",
+            "stuck_window_steps",
+            "stuck_collisions",
+            "window_margin_m",
+            "target_mark_detour_m",
         )
         for name in positive:
             if getattr(self, name) <= 0:
                 raise L3MVNError(f"{name} must be positive, got {getattr(self, name)}")
-        nonnegative = ("obstacle_dilation_cells", "clearance_cells", "clearance_detour_m", "stuck_min_displacement_m",
-                       "target_mark_clears")
+        nonnegative = (
+            "obstacle_dilation_cells",
+            "clearance_cells",
+            "clearance_detour_m",
+            "stuck_min_displacement_m",
+            "target_mark_clears",
+        )
         bad = [n for n in nonnegative if not getattr(self, n) >= 0]
         if bad:
             raise L3MVNError(f"{', '.join(bad)} must be >= 0, got {', '.join(str(getattr(self, n)) for n in bad)}")
@@ -88,5 +101,7 @@ class PlannerConfig:
         if self.turn_threshold_deg >= 180:
             raise L3MVNError(f"turn_threshold_deg must be below 180, got {self.turn_threshold_deg}")
         if not self.turn_threshold_deg <= self.keep_heading_deg < 90:
-            raise L3MVNError(f"keep_heading_deg must lie in [turn_threshold_deg ({self.turn_threshold_deg:g}), 90), "
-                             f"got {self.keep_heading_deg}")
+            raise L3MVNError(
+                f"keep_heading_deg must lie in [turn_threshold_deg ({self.turn_threshold_deg:g}), 90), "
+                f"got {self.keep_heading_deg}"
+            )

@@ -39,7 +39,8 @@ class PolicyConfig:
         if self.head is not None and self.head not in HEAD_KINDS:
             raise L3MVNError(f"unknown feed-forward head {self.head!r}; valid: {', '.join(HEAD_KINDS)}")
         if not 0.0 <= self.bound_low < self.bound_high <= 1.0:
-            raise L3MVNError(f"the bound must satisfy 0 <= bound_low < bound_high <= 1, got {self.bound_low}, "
-                             f"{self.bound_high}")
+            raise L3MVNError(
+                f"the bound must satisfy 0 <= bound_low < bound_high <= 1, got {self.bound_low}, {self.bound_high}"
+            )
         if not (math.isfinite(self.seg_noise) and 0.0 <= self.seg_noise <= 1.0):
             raise L3MVNError(f"seg_noise must lie in [0, 1], got {self.seg_noise}")

@@ -48,8 +48,16 @@ class SimConfig:
         for name in ("frame_height", "frame_width", "max_steps"):
             if getattr(self, name) <= 0:
                 raise L3MVNError(f"{name} must be positive, got {getattr(self, name)}")
-        for name in ("camera_height_m", "forward_step_m", "turn_angle_deg", "tilt_angle_deg", "agent_radius_m",
-                     "wall_height_m", "server_timeout_s", "max_climb_m"):
+        for name in (
+            "camera_height_m",
+            "forward_step_m",
+            "turn_angle_deg",
+            "tilt_angle_deg",
+            "agent_radius_m",
+            "wall_height_m",
+            "server_timeout_s",
+            "max_climb_m",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise L3MVNError(f"{name} must be a positive finite number, got {value}")
@@ -68,8 +76,10 @@ class SimConfig:
         if self.backend not in BACKENDS:
             raise L3MVNError(f"unknown simulator backend {self.backend!r}; valid: {', '.join(BACKENDS)}")
         if self.backend == "habitat" and not self.habitat_python:
-            raise L3MVNError("the habitat backend needs habitat_python: the python of the environment that has "
-                             "habitat-sim (--habitat-python PATH)")
+            raise L3MVNError(
+                "the habitat backend needs habitat_python: the python of the environment that has "
+                "habitat-sim (--habitat-python PATH)"
+            )
         if self.camera_height_m >= self.wall_height_m:
             raise L3MVNError("camera_height_m must be below wall_height_m (the camera would see over every wall)")
 
@@ -77,5 +87,5 @@ class SimConfig:
     def turn_angle_rad(self) -> float:
         return math.radians(self.turn_angle_deg)
 
-    def with_frame(self, height: int, width: int) -> "SimConfig":
+    def with_frame(self, height: int, width: int) -> SimConfig:
         return dataclasses.replace(self, frame_height=height, frame_width=width)

@@ -44,7 +44,9 @@ class TaskConfig:
         if not (math.isfinite(self.success_distance_m) and self.success_distance_m > 0):
             raise L3MVNError(f"success_distance_m must be a positive finite number, got {self.success_distance_m}")
         if not (math.isfinite(self.view_point_distance_m) and self.view_point_distance_m > 0):
-            raise L3MVNError(f"view_point_distance_m must be a positive finite number, got {self.view_point_distance_m}")
+            raise L3MVNError(
+                f"view_point_distance_m must be a positive finite number, got {self.view_point_distance_m}"
+            )
         for name in ("collision_window", "confirm_min_cells", "view_rows"):
             if getattr(self, name) < 1:
                 raise L3MVNError(f"{name} must be >= 1, got {getattr(self, name)}")

@@ -27,7 +27,17 @@ from l3mvn.run.audit.report import format_report, write_diagnostic_png
 from l3mvn.run.audit.split import audit_scenes, audit_split, load_split_for_audit
 
 __all__ = [
-    "REASONS", "AuditConfig", "InstanceAudit", "EpisodeAudit", "FloorAudit", "AuditReport", "FloorAuditor",
-    "audit_floor", "audit_scenes", "audit_split", "load_split_for_audit", "format_report",
+    "REASONS",
+    "AuditConfig",
+    "InstanceAudit",
+    "EpisodeAudit",
+    "FloorAudit",
+    "AuditReport",
+    "FloorAuditor",
+    "audit_floor",
+    "audit_scenes",
+    "audit_split",
+    "load_split_for_audit",
+    "format_report",
     "write_diagnostic_png",
 ]

@@ -27,8 +27,9 @@ from l3mvn.world.task.regions import footprint_region
 class FloorAuditor:
     """Audits the goal instances of one floor; renderer, perception and agent rule built once and reused."""
 
-    def __init__(self, scene: SceneMap, cfg: Config | None = None, audit: AuditConfig | None = None,
-                 world: World | None = None) -> None:
+    def __init__(
+        self, scene: SceneMap, cfg: Config | None = None, audit: AuditConfig | None = None, world: World | None = None
+    ) -> None:
         """``world``: audit this mesh instead of the one the built-in simulator builds from ``scene``."""
         self.scene = scene
         self.config = cfg or Config()
@@ -49,8 +50,9 @@ class FloorAuditor:
         sizes[0] = 0
         return self.walk_labels == int(np.argmax(sizes)), "largest walkable component"
 
-    def run(self, episodes: list[Episode] | None = None, out_dir: Path | None = None,
-            all_pngs: bool = False) -> FloorAudit:
+    def run(
+        self, episodes: list[Episode] | None = None, out_dir: Path | None = None, all_pngs: bool = False
+    ) -> FloorAudit:
         """Every goal instance of the floor, then the given episodes of it; a diagnostic picture per
         instance that is not confirmable (every instance with ``all_pngs``) when ``out_dir`` is given."""
         t0 = time.perf_counter()
@@ -111,15 +113,15 @@ class FloorAuditor:
         elsewhere = region_walk & ~reachable
         confirmed_elsewhere = not confirmable and any(
             first_confirming(spread_in(elsewhere, comp, audit.region_poses)) is not None
-            for comp in _labels_in(self.walk_labels, elsewhere))
+            for comp in _labels_in(self.walk_labels, elsewhere)
+        )
         if not confirmable and audit.outside_poses:
             ring = walk & reachable & ~region & (d_fp <= audit.search_radius_m)
             cell = first_confirming(self._spread(np.argwhere(ring), d_fp, audit.outside_poses, rng))
             if cell is not None:
                 nearest = float(d_fp[cell[0], cell[1]])
 
-        others = [c for k, c in enumerate(scene.categories)
-                  if c != category and (scene.objects[k][footprint]).any()]
+        others = [c for k, c in enumerate(scene.categories) if c != category and (scene.objects[k][footprint]).any()]
         reason = None
         if not confirmable:
             ids, mr, mc = self._mesh_cells
@@ -142,12 +144,23 @@ class FloorAuditor:
             else:
                 reason = "hidden"
         inst = InstanceAudit(
-            scene=scene.name, floor=scene.floor, category=category, instance_id=instance_id,
-            cells=int(footprint.sum()), centroid=centroid, gap_m=_metres(gap), region_cells=int(region_walk.sum()),
-            reachable_region_cells=int(region_reach.sum()), confirmable=confirmable, reason=reason,
-            nearest_confirmable_m=_metres(nearest), max_pixels=best.pixels, max_mapped_cells=best.mapped,
+            scene=scene.name,
+            floor=scene.floor,
+            category=category,
+            instance_id=instance_id,
+            cells=int(footprint.sum()),
+            centroid=centroid,
+            gap_m=_metres(gap),
+            region_cells=int(region_walk.sum()),
+            reachable_region_cells=int(region_reach.sum()),
+            confirmable=confirmable,
+            reason=reason,
+            nearest_confirmable_m=_metres(nearest),
+            max_pixels=best.pixels,
+            max_mapped_cells=best.mapped,
             shared_with=tuple(others),
-            poses_tested=len(tested), best_pose=best.view,
+            poses_tested=len(tested),
+            best_pose=best.view,
             region_components=tuple(_labels_in(self.walk_labels, region_walk)),
             confirmed_components=tuple(sorted(confirmed_in)),
         )
@@ -195,9 +208,14 @@ class FloorAuditor:
         return EpisodeAudit(ep.key, ep.goal, ep.object_id, bool(ok), ok, reason)
 
 
-def audit_floor(scene: SceneMap, cfg: Config | None = None, episodes: list[Episode] | None = None,
-                audit: AuditConfig | None = None, out_dir: str | Path | None = None,
-                all_pngs: bool = False) -> FloorAudit:
+def audit_floor(
+    scene: SceneMap,
+    cfg: Config | None = None,
+    episodes: list[Episode] | None = None,
+    audit: AuditConfig | None = None,
+    out_dir: str | Path | None = None,
+    all_pngs: bool = False,
+) -> FloorAudit:
     """Audit every goal instance of one floor (and the episodes given for it)."""
     out = None if out_dir is None else Path(out_dir)
     return FloorAuditor(scene, cfg, audit).run(episodes, out, all_pngs)

@@ -21,9 +21,9 @@ REASONS: dict[str, str] = {
     "no_floor": "no walkable cell within the success distance (gap_m: to the nearest walkable cell)",
     "no_region": "walkable cells lie within the success distance, none in the success region (geodesic rule)",
     "unreachable": "no reachable success-region pose confirms it (reachable: the walkable components of the "
-                   "episode starts, else the largest), but an unreachable one does, or none is reachable",
+    "episode starts, else the largest), but an unreachable one does, or none is reachable",
     "buried": "0 pixels from every tested pose, and every footprint cell is also another category's "
-              "(shared_with): the world builds that object on or around it",
+    "(shared_with): the world builds that object on or around it",
     "occluded": "in the mesh, but 0 pixels of it from every tested standing pose (walled in)",
     "outside_only": "confirmable, but only from poses outside its success region",
     "hidden": "pixels seen, never enough mapped cells near it for the agent's confirmation rule",
@@ -139,16 +139,31 @@ class AuditReport:
         return {r: counts[r] for r in REASONS}
 
     def to_json(self) -> dict:
-        return json_safe({
-            "source": self.source, "split": self.split, "rule": self.rule, "frame": list(self.frame),
-            "seconds": round(self.seconds, 2), "reasons": REASONS,
-            "counts": {"instances": len(self.instances),
-                       "confirmable": sum(i.confirmable for i in self.instances),
-                       **self.reason_counts(),
-                       "episodes": len(self.episodes),
-                       "episodes_confirmable": sum(e.confirmable for e in self.episodes)},
-            "floors": [{"scene": f.scene, "floor": f.floor, "reachable_from": f.reachable_from,
-                        "seconds": round(f.seconds, 2)} for f in self.floors],
-            "instances": [dataclasses.asdict(i) for i in self.instances],
-            "episodes": [dataclasses.asdict(e) for e in self.episodes],
-        })
+        return json_safe(
+            {
+                "source": self.source,
+                "split": self.split,
+                "rule": self.rule,
+                "frame": list(self.frame),
+                "seconds": round(self.seconds, 2),
+                "reasons": REASONS,
+                "counts": {
+                    "instances": len(self.instances),
+                    "confirmable": sum(i.confirmable for i in self.instances),
+                    **self.reason_counts(),
+                    "episodes": len(self.episodes),
+                    "episodes_confirmable": sum(e.confirmable for e in self.episodes),
+                },
+                "floors": [
+                    {
+                        "scene": f.scene,
+                        "floor": f.floor,
+                        "reachable_from": f.reachable_from,
+                        "seconds": round(f.seconds, 2),
+                    }
+                    for f in self.floors
+                ],
+                "instances": [dataclasses.asdict(i) for i in self.instances],
+                "episodes": [dataclasses.asdict(e) for e in self.episodes],
+            }
+        )

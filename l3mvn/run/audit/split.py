@@ -15,10 +15,18 @@ from l3mvn.world.episode import Episode
 from l3mvn.world.scenes.scene import SceneMap
 
 
-def audit_scenes(scenes: dict[str, dict[int, SceneMap]], cfg: Config | None = None,
-                 episodes: list[Episode] | None = None, audit: AuditConfig | None = None, workers: int = 2,
-                 out_dir: str | Path | None = None, all_pngs: bool = False, source: str = "", split: str = "",
-                 progress: Callable[[FloorAudit], None] | None = None) -> AuditReport:
+def audit_scenes(
+    scenes: dict[str, dict[int, SceneMap]],
+    cfg: Config | None = None,
+    episodes: list[Episode] | None = None,
+    audit: AuditConfig | None = None,
+    workers: int = 2,
+    out_dir: str | Path | None = None,
+    all_pngs: bool = False,
+    source: str = "",
+    split: str = "",
+    progress: Callable[[FloorAudit], None] | None = None,
+) -> AuditReport:
     """Audit every floor of ``scenes``, ``workers`` floors at a time (largest first), in name order."""
     cfg = cfg or Config()
     if workers < 1:
@@ -26,8 +34,17 @@ def audit_scenes(scenes: dict[str, dict[int, SceneMap]], cfg: Config | None = No
     cfg.agent.downsample_factor(cfg.sim.frame_height, cfg.sim.frame_width)
     t0 = time.perf_counter()
     floors = sorted((s for fl in scenes.values() for s in fl.values()), key=lambda s: -s.navigable.size)
-    jobs = [(s, cfg, [e for e in episodes or () if (e.scene, e.floor) == (s.name, s.floor)], audit,
-             None if out_dir is None else str(out_dir), all_pngs) for s in floors]
+    jobs = [
+        (
+            s,
+            cfg,
+            [e for e in episodes or () if (e.scene, e.floor) == (s.name, s.floor)],
+            audit,
+            None if out_dir is None else str(out_dir),
+            all_pngs,
+        )
+        for s in floors
+    ]
     if out_dir is not None:
         make_folder(out_dir, "--out")
     done: list[FloorAudit] = []
@@ -55,12 +72,19 @@ def audit_scenes(scenes: dict[str, dict[int, SceneMap]], cfg: Config | None = No
                 if progress:
                     progress(done[-1])
     done.sort(key=lambda f: (f.scene, f.floor))
-    return AuditReport(source, split, cfg.task.success_rule, (cfg.sim.frame_height, cfg.sim.frame_width),
-                       time.perf_counter() - t0, done)
+    return AuditReport(
+        source,
+        split,
+        cfg.task.success_rule,
+        (cfg.sim.frame_height, cfg.sim.frame_width),
+        time.perf_counter() - t0,
+        done,
+    )
 
 
-def load_split_for_audit(dataset: str | Path, split: str, scene: str | None = None
-                         ) -> tuple[dict[str, dict[int, SceneMap]], list[Episode]]:
+def load_split_for_audit(
+    dataset: str | Path, split: str, scene: str | None = None
+) -> tuple[dict[str, dict[int, SceneMap]], list[Episode]]:
     """A SemExp split's floors and its episodes (none when it has no episode files); ``scene``
     keeps only that scene."""
     from l3mvn.world.episodes import read_episodes
@@ -78,9 +102,17 @@ def load_split_for_audit(dataset: str | Path, split: str, scene: str | None = No
     return scenes, episodes
 
 
-def audit_split(dataset: str | Path, split: str, cfg: Config | None = None, scene: str | None = None,
-                audit: AuditConfig | None = None, workers: int = 2, out_dir: str | Path | None = None,
-                all_pngs: bool = False, progress: Callable[[FloorAudit], None] | None = None) -> AuditReport:
+def audit_split(
+    dataset: str | Path,
+    split: str,
+    cfg: Config | None = None,
+    scene: str | None = None,
+    audit: AuditConfig | None = None,
+    workers: int = 2,
+    out_dir: str | Path | None = None,
+    all_pngs: bool = False,
+    progress: Callable[[FloorAudit], None] | None = None,
+) -> AuditReport:
     """``audit_scenes`` on a SemExp split and its episodes (``load_split_for_audit``)."""
     scenes, episodes = load_split_for_audit(dataset, split, scene)
     return audit_scenes(scenes, cfg, episodes, audit, workers, out_dir, all_pngs, str(dataset), split, progress)

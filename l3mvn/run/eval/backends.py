@@ -19,11 +19,10 @@ import sys
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Generator
+from collections.abc import Generator, Iterable
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
-from typing import Iterable
 
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.eval.job import EvalJob, error_row
@@ -32,8 +31,7 @@ _PR_SET_PDEATHSIG = 1
 _STOP_GRACE_S = 5.0
 
 
-def run_local(job: EvalJob, keys: Iterable[str], workers: int, *,
-              max_retries: int = 1) -> Generator[dict, None, None]:
+def run_local(job: EvalJob, keys: Iterable[str], workers: int, *, max_retries: int = 1) -> Generator[dict, None, None]:
     """One result row per key, in completion order; ``workers=1`` runs in this process. Arguments are
     checked now, workers start on the first ``next()``.
 
@@ -49,6 +47,7 @@ def run_local(job: EvalJob, keys: Iterable[str], workers: int, *,
 
 
 # --- the pool ----------------------------------------------------------------------------------
+
 
 @dataclass
 class _Worker:
@@ -100,13 +99,17 @@ class _Pool:
         _feed(fresh, self.pending)
         if self.strikes[key] <= self.max_retries:
             return None
-        return error_row(self.job, key, f"worker process died {self.strikes[key]} times running this episode "
-                                        f"(last exit code {w.process.exitcode})")
+        return error_row(
+            self.job,
+            key,
+            f"worker process died {self.strikes[key]} times running this episode (last exit code {w.process.exitcode})",
+        )
 
     def _start(self) -> _Worker:
         parent, child = self.ctx.Pipe()
-        process = self.ctx.Process(target=_worker_main, args=(self.job, child, os.getpid()), daemon=True,
-                                   name="l3mvn-eval-worker")
+        process = self.ctx.Process(
+            target=_worker_main, args=(self.job, child, os.getpid()), daemon=True, name="l3mvn-eval-worker"
+        )
         with _children_ignore_sigint():
             process.start()
         child.close()
@@ -153,6 +156,7 @@ def _stop(workers: list[_Worker]) -> None:
 
 
 # --- signals -----------------------------------------------------------------------------------
+
 
 def _in_main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()

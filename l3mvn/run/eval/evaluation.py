@@ -17,10 +17,10 @@ from typing import TextIO
 from tqdm import tqdm
 
 from l3mvn.core.errors import L3MVNError, one_line
-from l3mvn.world.episode import Episode
 from l3mvn.run.eval import backends
 from l3mvn.run.eval.job import EvalJob, is_error_row
 from l3mvn.run.eval.results import ResultWriter, row_problem
+from l3mvn.world.episode import Episode
 
 BACKENDS = ("local", "ray")
 
@@ -36,9 +36,18 @@ class Evaluation:
     interrupted: bool = False
 
 
-def evaluate(job: EvalJob, episodes: list[Episode], *, out: str | None = None, resume: bool = False,
-             backend: str = "local", workers: int | None = None, address: str | None = None,
-             video_dir: str | None = None, stream: TextIO | None = None) -> Evaluation:
+def evaluate(
+    job: EvalJob,
+    episodes: list[Episode],
+    *,
+    out: str | None = None,
+    resume: bool = False,
+    backend: str = "local",
+    workers: int | None = None,
+    address: str | None = None,
+    video_dir: str | None = None,
+    stream: TextIO | None = None,
+) -> Evaluation:
     """Run ``episodes`` of ``job`` (those not already in ``out`` with ``resume``) and append each result
     line to ``out``; progress and per-episode problems go to ``stream`` (None: silent). ``video_dir``:
     an MP4 per episode there, from its recording."""
@@ -57,12 +66,19 @@ def evaluate(job: EvalJob, episodes: list[Episode], *, out: str | None = None, r
             run.rows = {key: row for key, row in previous.rows.items() if key in wanted}
         todo = [ep.key for ep in episodes if ep.key not in run.rows]
         eset = job.load()
-        _say(stream, f"{eset.name}/{eset.split} ({eset.format}): {len(episodes)} episodes, {len(todo)} to run, "
-                     f"policy {job.policy}, rule {rule}, config {job.config_hash}")
+        _say(
+            stream,
+            f"{eset.name}/{eset.split} ({eset.format}): {len(episodes)} episodes, {len(todo)} to run, "
+            f"policy {job.policy}, rule {rule}, config {job.config_hash}",
+        )
         rows = _rows(job, todo, backend, workers, address)
         try:
-            with closing(rows), tqdm(total=len(todo), unit="ep", file=stream, dynamic_ncols=True, mininterval=1.0,
-                                     disable=stream is None) as bar:
+            with (
+                closing(rows),
+                tqdm(
+                    total=len(todo), unit="ep", file=stream, dynamic_ncols=True, mininterval=1.0, disable=stream is None
+                ) as bar,
+            ):
                 for row in rows:
                     writer.write(row)
                     bar.update(1)
@@ -72,8 +88,9 @@ def evaluate(job: EvalJob, episodes: list[Episode], *, out: str | None = None, r
     return run
 
 
-def _rows(job: EvalJob, todo: list[str], backend: str, workers: int | None,
-          address: str | None) -> Generator[dict, None, None]:
+def _rows(
+    job: EvalJob, todo: list[str], backend: str, workers: int | None, address: str | None
+) -> Generator[dict, None, None]:
     if backend == "ray":
         from l3mvn.run.eval.ray_backend import run_ray
 
@@ -96,8 +113,9 @@ def _take(run: Evaluation, row: dict, rule: str, video_dir: str | None, job: Eva
         run.unwritten.append(problem)
         bar.write(f"{row['key']}: no video: {problem}")
     done = list(run.rows.values())
-    bar.set_postfix_str(f"SR {sum(r['success'] for r in done) / len(done):.3f} "
-                        f"SPL {sum(r['spl'] or 0 for r in done) / len(done):.3f}")
+    bar.set_postfix_str(
+        f"SR {sum(r['success'] for r in done) / len(done):.3f} SPL {sum(r['spl'] or 0 for r in done) / len(done):.3f}"
+    )
 
 
 def _episode_video(row: dict, record_dir: str, video_dir: str) -> str | None:

@@ -8,10 +8,11 @@ instance of *every* goal category present in the house (the frontier oracle's cr
 walk labels six choices). The ground truth only goes into the file; the agent never reads it.
 
 File: JSON lines. A choice line is ``{"house", "floor", "episode", "seed", "goal", "step", "mapped"
-(every category on the agent's map), "frontiers": [...]}``; after each episode's choices one ``{"done": episode, "seed", "choices"}`` line. An episode
-is written in one ``write`` when it ends, so ``resume`` keeps every episode with its ``done`` line
-and drops a block cut off by a kill. Episodes are seeded by id (``MapAgent.reset``), so a seed gives
-the same file whatever the worker count or the order of runs.
+(every category on the agent's map), "frontiers": [...]}``; after each episode's choices one
+``{"done": episode, "seed", "choices"}`` line. An episode is written in one ``write`` when it ends,
+so ``resume`` keeps every episode with its ``done`` line and drops a block cut off by a kill.
+Episodes are seeded by id (``MapAgent.reset``), so a seed gives the same file whatever the worker
+count or the order of runs.
 """
 
 from __future__ import annotations
@@ -26,23 +27,23 @@ from pathlib import Path
 
 import numpy as np
 
-from l3mvn.core.config import Config
-from l3mvn.world.datasets import EpisodeSet, load_episode_set
-from l3mvn.world.episodes import generate_episodes
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.decision import GoalKind
 from l3mvn.agent.frontiers import Frontier
 from l3mvn.agent.language.frontier_file import frontier_query, load_choices
 from l3mvn.agent.language.vocabulary import GOALS, canonical
 from l3mvn.agent.mapping import SemanticMap
 from l3mvn.agent.policies.oracle_frontier import frontier_goal_distances
-from l3mvn.world.baselines import object_distances
+from l3mvn.core.config import Config
+from l3mvn.core.errors import L3MVNError
+from l3mvn.core.writing import write_file
 from l3mvn.run.registry import PolicySpec, policies
 from l3mvn.run.runner import Runner
+from l3mvn.world.baselines import object_distances
+from l3mvn.world.datasets import EpisodeSet, load_episode_set
+from l3mvn.world.episode import Episode
+from l3mvn.world.episodes import generate_episodes
 from l3mvn.world.scenes.semexp import load_split
 from l3mvn.world.task.regions import GoalRegion
-from l3mvn.world.episode import Episode
-from l3mvn.core.writing import write_file
 
 DEFAULT_FRAME = (120, 160)  # the regret bench's: the map, not the pixels, is what the prior sees
 
@@ -78,8 +79,9 @@ def window_object_distances(frontier: Frontier, sem_map: SemanticMap, half_cells
     return dict(sorted(out.items(), key=lambda kv: (kv[1], kv[0])))
 
 
-def label_frontiers(frontiers: list[Frontier], sem_map: SemanticMap, goal_fields: dict[str, GoalRegion],
-                    half_cells: int) -> list[dict]:
+def label_frontiers(
+    frontiers: list[Frontier], sem_map: SemanticMap, goal_fields: dict[str, GoalRegion], half_cells: int
+) -> list[dict]:
     """One record per frontier: the agent's view of it plus the ground-truth metres from it to every
     goal in ``goal_fields`` (``None`` for a goal whose instances it has no path to, or that the house
     lacks)."""
@@ -88,16 +90,25 @@ def label_frontiers(frontiers: list[Frontier], sem_map: SemanticMap, goal_fields
     for i, f in enumerate(frontiers):
         objects = window_object_distances(f, sem_map, half_cells)
         if set(objects) != {canonical(o) for o in f.objects}:
-            raise L3MVNError(f"frontier {f.id}: window objects {sorted(objects)} differ from its "
-                             f"extracted objects {sorted(f.objects)}")
-        goal_m = {g: (round(float(truth[g][i]), 3) if g in truth and np.isfinite(truth[g][i]) else None)
-                  for g in GOALS}
-        out.append({
-            "id": f.id, "center": [int(f.center[0]), int(f.center[1])], "size": int(f.size),
-            "distance_m": round(f.distance_m, 3), "cost": round(f.cost, 3), "utility": round(f.utility, 3),
-            "s_cu": round(f.s_cu, 4), "objects": {k: round(v, 2) for k, v in objects.items()},
-            "query": frontier_query(tuple(objects)), "goal_m": goal_m,
-        })
+            raise L3MVNError(
+                f"frontier {f.id}: window objects {sorted(objects)} differ from its "
+                f"extracted objects {sorted(f.objects)}"
+            )
+        goal_m = {g: (round(float(truth[g][i]), 3) if g in truth and np.isfinite(truth[g][i]) else None) for g in GOALS}
+        out.append(
+            {
+                "id": f.id,
+                "center": [int(f.center[0]), int(f.center[1])],
+                "size": int(f.size),
+                "distance_m": round(f.distance_m, 3),
+                "cost": round(f.cost, 3),
+                "utility": round(f.utility, 3),
+                "s_cu": round(f.s_cu, 4),
+                "objects": {k: round(v, 2) for k, v in objects.items()},
+                "query": frontier_query(tuple(objects)),
+                "goal_m": goal_m,
+            }
+        )
     return out
 
 
@@ -122,8 +133,13 @@ def _walk(job: FrontierDataJob) -> tuple[str, int, list[dict]]:
     key = (job.dataset, job.split, job.frame, job.episodes_per_house)
     if _STATE.get("key") != key:
         cfg = Config().with_frame(*job.frame)
-        _STATE.update(key=key, cfg=cfg, eset=_episode_set(job.dataset, job.split, cfg, job.episodes_per_house),
-                      runners={}, fields={})
+        _STATE.update(
+            key=key,
+            cfg=cfg,
+            eset=_episode_set(job.dataset, job.split, cfg, job.episodes_per_house),
+            runners={},
+            fields={},
+        )
     cfg, eset = _STATE["cfg"], _STATE["eset"]
     ep = eset.episodes[job.index]
     runner = _STATE["runners"].setdefault(job.seed, Runner(cfg, seed=job.seed, config_hash="frontier-data"))
@@ -145,10 +161,24 @@ def _walk(job: FrontierDataJob) -> tuple[str, int, list[dict]]:
             continue
         last = frontiers
         sem_map = decision.map
-        mapped = sorted({canonical(sem_map.category_names[k])
-                         for k in np.flatnonzero(sem_map.categories.reshape(len(sem_map.categories), -1).any(axis=1))})
-        rows.append({"house": ep.scene, "floor": ep.floor, "episode": ep.key, "seed": job.seed, "goal": ep.goal,
-                     "step": step, "mapped": mapped, "frontiers": label_frontiers(frontiers, sem_map, fields, half)})
+        mapped = sorted(
+            {
+                canonical(sem_map.category_names[k])
+                for k in np.flatnonzero(sem_map.categories.reshape(len(sem_map.categories), -1).any(axis=1))
+            }
+        )
+        rows.append(
+            {
+                "house": ep.scene,
+                "floor": ep.floor,
+                "episode": ep.key,
+                "seed": job.seed,
+                "goal": ep.goal,
+                "step": step,
+                "mapped": mapped,
+                "frontiers": label_frontiers(frontiers, sem_map, fields, half),
+            }
+        )
     return ep.key, job.seed, rows
 
 
@@ -172,21 +202,34 @@ def read_done(path: Path) -> tuple[set[tuple[str, int | None]], list[str]]:
     return done, keep
 
 
-def generate_frontier_data(dataset: str, split: str, out: str | Path, *, seeds: Sequence[int] = (0,),
-                           houses: Sequence[str] | None = None, policy: str = "cost-utility",
-                           episodes_per_house: int | None = None, limit: int | None = None, workers: int = 1,
-                           frame: tuple[int, int] = DEFAULT_FRAME, resume: bool = False,
-                           progress: Callable[[int, int], None] | None = None) -> dict:
+def generate_frontier_data(
+    dataset: str,
+    split: str,
+    out: str | Path,
+    *,
+    seeds: Sequence[int] = (0,),
+    houses: Sequence[str] | None = None,
+    policy: str = "cost-utility",
+    episodes_per_house: int | None = None,
+    limit: int | None = None,
+    workers: int = 1,
+    frame: tuple[int, int] = DEFAULT_FRAME,
+    resume: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict:
     """Walk every (episode, seed) of the split (only ``houses`` if given, the first ``limit`` episodes
     per house if given) and append its choices to ``out``; returns counts of what the file holds."""
+
     def walks(spec: PolicySpec) -> bool:  # a map agent that reads no language model and no ground truth
         return spec.map_based and spec.language is None and not spec.ground_truth and not spec.driven
 
     specs = policies()
     if policy not in specs or not walks(specs[policy]):
         valid = [name for name, spec in specs.items() if walks(spec)]
-        raise L3MVNError(f"policy {policy!r} cannot walk frontier data (it must read no language model and "
-                         f"no ground truth); valid: {', '.join(valid)}")
+        raise L3MVNError(
+            f"policy {policy!r} cannot walk frontier data (it must read no language model and "
+            f"no ground truth); valid: {', '.join(valid)}"
+        )
     if not seeds or any(s < 0 for s in seeds):
         raise L3MVNError(f"seeds must be one or more integers >= 0, got {list(seeds)}")
     if workers < 1 or (limit is not None and limit < 1) or (episodes_per_house is not None and episodes_per_house < 1):
@@ -212,8 +255,12 @@ def generate_frontier_data(dataset: str, split: str, out: str | Path, *, seeds: 
         raise L3MVNError(f"{out} exists; pass --resume to continue it or choose another --out")
     write_file(out, "".join(line + "\n" for line in keep), "--out")
     height, width = frame
-    jobs = [FrontierDataJob(str(dataset), split, i, s, policy, (height, width), episodes_per_house)
-            for s in seeds for i in indices if (eset.episodes[i].key, s) not in done]
+    jobs = [
+        FrontierDataJob(str(dataset), split, i, s, policy, (height, width), episodes_per_house)
+        for s in seeds
+        for i in indices
+        if (eset.episodes[i].key, s) not in done
+    ]
     total, finished = len(jobs), 0
     if progress:
         progress(0, total)
@@ -242,14 +289,20 @@ def _append(fh, text: str, out: Path) -> None:
         fh.flush()
         os.fsync(fh.fileno())
     except OSError as exc:
-        raise L3MVNError(f"cannot write {out}: {exc.strerror or exc}; the episodes finished before are kept "
-                         "(--resume continues)") from None
+        raise L3MVNError(
+            f"cannot write {out}: {exc.strerror or exc}; the episodes finished before are kept (--resume continues)"
+        ) from None
 
 
 def summarise(path: str | Path) -> dict:
     choices = load_choices(path)
-    return {"path": str(path), "choices": len(choices), "frontiers": sum(len(c.frontiers) for c in choices),
-            "houses": len({c.house for c in choices}), "episodes": len({(c.episode, c.seed) for c in choices})}
+    return {
+        "path": str(path),
+        "choices": len(choices),
+        "frontiers": sum(len(c.frontiers) for c in choices),
+        "houses": len({c.house for c in choices}),
+        "episodes": len({(c.episode, c.seed) for c in choices}),
+    }
 
 
 # --- the command (registered by l3mvn.run.cli under `l3mvn language frontier-data`) ----------------------
@@ -260,8 +313,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="agent seeds; each walks every episode")
     parser.add_argument("--houses", nargs="+", default=None, help="only these houses (default: all of the split)")
     parser.add_argument("--policy", default="cost-utility", help="map-based policy that walks (default cost-utility)")
-    parser.add_argument("--episodes-per-house", type=int, default=None,
-                        help="generate N episodes per floor instead of reading the dataset's")
+    parser.add_argument(
+        "--episodes-per-house",
+        type=int,
+        default=None,
+        help="generate N episodes per floor instead of reading the dataset's",
+    )
     parser.add_argument("--limit", type=int, default=None, help="only the first N episodes of each house")
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--resume", action="store_true", help="skip (episode, seed) pairs already in --out")
@@ -278,10 +335,19 @@ def run(args: argparse.Namespace) -> int:
         bar.refresh()
 
     try:
-        summary = generate_frontier_data(args.dataset, args.split, args.out, seeds=args.seeds, houses=args.houses,
-                                         policy=args.policy, episodes_per_house=args.episodes_per_house,
-                                         limit=args.limit, workers=args.workers, resume=args.resume,
-                                         progress=progress)
+        summary = generate_frontier_data(
+            args.dataset,
+            args.split,
+            args.out,
+            seeds=args.seeds,
+            houses=args.houses,
+            policy=args.policy,
+            episodes_per_house=args.episodes_per_house,
+            limit=args.limit,
+            workers=args.workers,
+            resume=args.resume,
+            progress=progress,
+        )
     finally:
         bar.close()
     print(json.dumps(summary))

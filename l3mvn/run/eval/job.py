@@ -20,12 +20,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from l3mvn.core.config import Config, config_dict, config_hash
-from l3mvn.world.datasets import EpisodeSet, load_episode_set
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.events import EventBus, StepEvent
-from l3mvn.run.registry import check_options, check_policy
 from l3mvn.run.recording import Recorder
+from l3mvn.run.registry import check_options, check_policy
 from l3mvn.run.runner import Runner
+from l3mvn.world.datasets import EpisodeSet, load_episode_set
 
 
 @dataclass(frozen=True)
@@ -44,9 +44,19 @@ class EvalJob:
     scenes: str | None = None  # scan root of a habitat ObjectNav dataset (--scenes)
 
     @classmethod
-    def create(cls, dataset: str | Path | None, split: str, *, houses: int = 5, episodes_per_house: int = 10,
-               seed: int = 0, config: Config | None = None, policy: str,
-               record_dir: str | Path | None = None, scenes: str | Path | None = None) -> "EvalJob":
+    def create(
+        cls,
+        dataset: str | Path | None,
+        split: str,
+        *,
+        houses: int = 5,
+        episodes_per_house: int = 10,
+        seed: int = 0,
+        config: Config | None = None,
+        policy: str,
+        record_dir: str | Path | None = None,
+        scenes: str | Path | None = None,
+    ) -> EvalJob:
         """A job whose config hash covers the whole config tree, the policy and the seed (recording
         changes no result, so it is not hashed)."""
         config = config or Config()
@@ -76,15 +86,26 @@ class EvalJob:
             with _STATE_LOCK:
                 return _state(self).run(key, record_tag)
         except Exception as exc:  # a broken episode must not take the run down: report it as a row
-            return error_row(self, key, f"{type(exc).__name__}: {exc}", seconds=time.perf_counter() - t0,
-                             detail=traceback.format_exc(limit=8))
+            return error_row(
+                self,
+                key,
+                f"{type(exc).__name__}: {exc}",
+                seconds=time.perf_counter() - t0,
+                detail=traceback.format_exc(limit=8),
+            )
 
 
 def error_row(job: EvalJob, key: str, message: str, *, seconds: float = 0.0, detail: str = "") -> dict:
     """The line written for an episode that could not be run. It carries no metrics, is left out of
     summaries, and is retried by ``--resume`` (see ``is_error_row``)."""
-    row = {"key": key, "policy": job.policy, "config_hash": job.config_hash, "error": message,
-           "worker": worker_id(), "timing": {"total_s": round(seconds, 4)}}
+    row = {
+        "key": key,
+        "policy": job.policy,
+        "config_hash": job.config_hash,
+        "error": message,
+        "worker": worker_id(),
+        "timing": {"total_s": round(seconds, 4)},
+    }
     if detail:
         row["traceback"] = detail
     return row
@@ -106,6 +127,7 @@ def peak_rss_mb() -> float:
 
 # --- per-process state -------------------------------------------------------------------------
 
+
 @dataclass
 class _StageTotals:
     """Sums Decision.timings_ms over an episode (map-based agents report their stages there)."""
@@ -122,9 +144,15 @@ class _JobState:
     def __init__(self, job: EvalJob) -> None:
         self.job = job
         check_policy(job.policy)
-        self.episodes = load_episode_set(job.dataset, job.split, houses=job.houses,
-                                         episodes_per_house=job.episodes_per_house, seed=job.seed, cfg=job.config,
-                                         scenes_dir=job.scenes)
+        self.episodes = load_episode_set(
+            job.dataset,
+            job.split,
+            houses=job.houses,
+            episodes_per_house=job.episodes_per_house,
+            seed=job.seed,
+            cfg=job.config,
+            scenes_dir=job.scenes,
+        )
         self.by_key = {ep.key: ep for ep in self.episodes.episodes}
         self.runner = Runner(job.config, seed=job.seed, config_hash=job.config_hash)
 
@@ -138,8 +166,9 @@ class _JobState:
         recorder, unrecorded = None, None
         if self.job.record_dir is not None:
             try:
-                recorder = Recorder.for_episode(self.job.record_dir, self.episodes.name, episode, self.job.policy,
-                                                record_tag).attach(bus)
+                recorder = Recorder.for_episode(
+                    self.job.record_dir, self.episodes.name, episode, self.job.policy, record_tag
+                ).attach(bus)
             except L3MVNError as exc:  # the episode still runs: its result is worth more than its picture
                 unrecorded = str(exc)
         session = self.runner.session(self.episodes.scene_of(episode), self.job.policy, bus)

@@ -18,8 +18,7 @@ def summarize(results: list[dict], rule: str | None = None) -> dict:
     summary["rule"] = rule or (rules[0] if rules else "semexp")
     summary["policies"] = sorted({r["policy"] for r in results})
     summary["per_category"] = {
-        goal: _aggregate([r for r in results if r["goal"] == goal])
-        for goal in sorted({r["goal"] for r in results})
+        goal: _aggregate([r for r in results if r["goal"] == goal]) for goal in sorted({r["goal"] for r in results})
     }
     summary["failure_causes"] = dict(Counter(r["failure"] for r in results).most_common())
     summary["no_path"] = summary["failure_causes"].get("no_path", 0)
@@ -52,6 +51,8 @@ def format_summary(summary: dict) -> str:
     if causes:
         lines.append("failure causes: " + ", ".join(f"{k} {v}" for k, v in causes.items()))
     if summary.get("no_path"):
-        lines.append(f"{summary['no_path']} episodes have no path from start to goal: scored as failures "
-                     "(SR and SPL 0), left out of DTG")
+        lines.append(
+            f"{summary['no_path']} episodes have no path from start to goal: scored as failures "
+            "(SR and SPL 0), left out of DTG"
+        )
     return "\n".join(lines)

@@ -20,17 +20,17 @@ import os
 import subprocess
 import sys
 from collections import Counter, deque
-from collections.abc import Generator
+from collections.abc import Callable, Generator, Iterable, Iterator
 from contextlib import contextmanager, suppress
-from typing import Callable, Iterable, Iterator
 
 from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.run.eval.backends import interrupt_on_sigterm
 from l3mvn.run.eval.job import EvalJob, error_row
 
 
-def run_ray(job: EvalJob, keys: Iterable[str], address: str | None = None, num_workers: int | None = None,
-            max_retries: int = 2) -> Generator[dict, None, None]:
+def run_ray(
+    job: EvalJob, keys: Iterable[str], address: str | None = None, num_workers: int | None = None, max_retries: int = 2
+) -> Generator[dict, None, None]:
     """One result row per key, in completion order. Arguments are checked now (Ray missing raises
     L3MVNError), Ray is started or joined on the first ``next()``.
 
@@ -48,8 +48,9 @@ def run_ray(job: EvalJob, keys: Iterable[str], address: str | None = None, num_w
     return _run(ray, job, keys, address, num_workers, max_retries)
 
 
-def _run(ray, job: EvalJob, keys: list[str], address: str | None, num_workers: int | None,
-         max_retries: int) -> Generator[dict, None, None]:
+def _run(
+    ray, job: EvalJob, keys: list[str], address: str | None, num_workers: int | None, max_retries: int
+) -> Generator[dict, None, None]:
     if not keys:
         return
     leave = _connect(ray, address, num_workers)
@@ -113,8 +114,9 @@ def _schedule(ray, job: EvalJob, keys: list[str], actors: list, actor_cls, max_r
             if strikes[key] <= max_retries:
                 pending.appendleft(key)
             else:
-                row = error_row(job, key, f"Ray worker died {strikes[key]} times running this episode: "
-                                f"{first_line(exc)}")
+                row = error_row(
+                    job, key, f"Ray worker died {strikes[key]} times running this episode: {first_line(exc)}"
+                )
         except RayError as exc:
             row = error_row(job, key, f"Ray task failed: {first_line(exc)}")
         submit(actor)  # keep the actor busy while the caller handles the row
@@ -170,8 +172,9 @@ def _stop_private(ray, reaper: _Reaper) -> None:
 
 def _init(ray, where: str, **kwargs) -> None:
     try:
-        ray.init(include_dashboard=False, logging_level=logging.ERROR, log_to_driver=False,
-                 configure_logging=True, **kwargs)
+        ray.init(
+            include_dashboard=False, logging_level=logging.ERROR, log_to_driver=False, configure_logging=True, **kwargs
+        )
     except (ConnectionError, RuntimeError, ValueError) as exc:
         raise L3MVNError(f"could not start or join {where}: {first_line(exc)}") from None
 
@@ -210,8 +213,10 @@ def _check_loopback(ray) -> None:
     """Fail closed: a Ray whose node is not on loopback serves this run to the network."""
     ip = ray.util.get_node_ip_address()
     if not ipaddress.ip_address(ip).is_loopback:
-        raise L3MVNError(f"the private Ray instance started on {ip}, not on loopback, so it would be "
-                         f"reachable from the network (Ray {ray.__version__}); refusing to run on it")
+        raise L3MVNError(
+            f"the private Ray instance started on {ip}, not on loopback, so it would be "
+            f"reachable from the network (Ray {ray.__version__}); refusing to run on it"
+        )
 
 
 class _Reaper:
@@ -232,21 +237,35 @@ class _Reaper:
         self._driver = psutil.Process()
         self._before = {child.pid for child in self._driver.children()}
         self._proc = subprocess.Popen(
-            [sys.executable, "-c", _REAPER_PROGRAM, os.path.dirname(os.path.dirname(psutil.__file__)),
-             str(self._driver.pid), *map(str, self._before)],
-            stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, start_new_session=True)
+            [
+                sys.executable,
+                "-c",
+                _REAPER_PROGRAM,
+                os.path.dirname(os.path.dirname(psutil.__file__)),
+                str(self._driver.pid),
+                *map(str, self._before),
+            ],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+            text=True,
+            start_new_session=True,
+        )
 
     def name_ray_processes(self) -> None:
         """Narrow the watch from every new child of the driver to those ``ray.init`` started."""
-        started = [child.pid for child in self._driver.children()
-                   if child.pid not in self._before and child.pid != self._proc.pid]
+        started = [
+            child.pid
+            for child in self._driver.children()
+            if child.pid not in self._before and child.pid != self._proc.pid
+        ]
         assert self._proc.stdin is not None  # opened with stdin=PIPE
         try:
             self._proc.stdin.write(" ".join(map(str, started)) + "\n")
             self._proc.stdin.flush()
         except OSError:
-            raise L3MVNError(f"the process that stops Ray with this run exited (status "
-                             f"{self._proc.poll()}); not running without it") from None
+            raise L3MVNError(
+                f"the process that stops Ray with this run exited (status {self._proc.poll()}); not running without it"
+            ) from None
 
     def close(self) -> None:
         assert self._proc.stdin is not None  # opened with stdin=PIPE

@@ -27,15 +27,23 @@ def result_video_name(row: dict, *, with_policy: bool = False) -> str:
     return "_".join(parts) + ".mp4"
 
 
-def export_result_video(row: dict, recordings_dir: str | Path, out_dir: str | Path,
-                        options: VideoOptions = VideoOptions(), *, with_policy: bool = False,
-                        gif: bool = False) -> VideoResult:
+def export_result_video(
+    row: dict,
+    recordings_dir: str | Path,
+    out_dir: str | Path,
+    options: VideoOptions = VideoOptions(),
+    *,
+    with_policy: bool = False,
+    gif: bool = False,
+) -> VideoResult:
     """The video of one result row (``row_problem`` passed it), from its recording in
     ``recordings_dir`` (the newest, if several share the folder), named by outcome."""
     found = find_recording(recordings_dir, row["scene"], int(row["episode_id"]), row["policy"])
     if found is None:
-        raise L3MVNError(f"no recording of {row['scene']} episode {row['episode_id']} ({row['policy']}) in "
-                         f"{recordings_dir}: run eval with --record")
+        raise L3MVNError(
+            f"no recording of {row['scene']} episode {row['episode_id']} ({row['policy']}) in "
+            f"{recordings_dir}: run eval with --record"
+        )
     return export_video(found, Path(out_dir) / result_video_name(row, with_policy=with_policy), options, gif=gif)
 
 
@@ -50,18 +58,27 @@ def add_export_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gif", action="store_true", help="also write a GIF beside each MP4 (for READMEs)")
     defaults = VideoOptions()
     parser.add_argument("--fps", type=float, default=defaults.fps, help=f"steps per second (default {defaults.fps:g})")
-    parser.add_argument("--height", type=int, default=defaults.height,
-                        help=f"height of the camera and map panels in pixels (default {defaults.height})")
-    parser.add_argument("--title-seconds", type=float, default=defaults.title_s,
-                        help=f"how long the title card with the outcome shows (default {defaults.title_s:g})")
+    parser.add_argument(
+        "--height",
+        type=int,
+        default=defaults.height,
+        help=f"height of the camera and map panels in pixels (default {defaults.height})",
+    )
+    parser.add_argument(
+        "--title-seconds",
+        type=float,
+        default=defaults.title_s,
+        help=f"how long the title card with the outcome shows (default {defaults.title_s:g})",
+    )
 
 
 def run_export(args: argparse.Namespace) -> int:
     options = VideoOptions(fps=args.fps, height=args.height, title_s=args.title_seconds)
     if args.results is None:
         if args.video is None or args.recording is None:
-            raise L3MVNError("export needs VIDEO.mp4 --recording FILE.rrd, or --results FILE.jsonl --recordings DIR "
-                             "--out DIR")
+            raise L3MVNError(
+                "export needs VIDEO.mp4 --recording FILE.rrd, or --results FILE.jsonl --recordings DIR --out DIR"
+            )
         if args.recordings or args.out or args.failures:
             raise L3MVNError("--recordings, --out and --failures go with --results (batch export), not --recording")
         _report(export_video(args.recording, args.video, options, gif=args.gif))
@@ -77,8 +94,10 @@ def run_export(args: argparse.Namespace) -> int:
         print(f"{args.results}: skipped {problem}", file=sys.stderr)
     rows = [row for _, row in read.rows]
     if not rows:
-        raise L3MVNError(f"{args.results} holds no episode line to export"
-                         + (f" (first problem: {read.problems[0]})" if read.problems else ""))
+        raise L3MVNError(
+            f"{args.results} holds no episode line to export"
+            + (f" (first problem: {read.problems[0]})" if read.problems else "")
+        )
     chosen = [r for r in rows if not args.failures or r["success"] != 1]
     if not chosen:
         print(f"{args.results}: no {'failed ' if args.failures else ''}episodes: nothing to export")
@@ -87,20 +106,22 @@ def run_export(args: argparse.Namespace) -> int:
     skipped = []
     for row in chosen:
         try:
-            _report(export_result_video(row, args.recordings, args.out, options, with_policy=with_policy,
-                                        gif=args.gif))
+            _report(export_result_video(row, args.recordings, args.out, options, with_policy=with_policy, gif=args.gif))
         except L3MVNError as exc:
             skipped.append(f"{row['key']}: {exc}")
     for line in skipped:
         print(f"skipped {line}", file=sys.stderr)
     if len(skipped) == len(chosen):
-        raise L3MVNError(f"no video written: none of the {len(chosen)} episodes could be exported (first: "
-                         f"{skipped[0]})")
+        raise L3MVNError(
+            f"no video written: none of the {len(chosen)} episodes could be exported (first: {skipped[0]})"
+        )
     print(f"wrote {len(chosen) - len(skipped)} videos to {args.out}" + (f", skipped {len(skipped)}" if skipped else ""))
     return 0
 
 
 def _report(v: VideoResult) -> None:
     gif = f" and {v.gif}" if v.gif else ""
-    print(f"wrote {v.path}{gif}: {v.frames} frames ({v.title_frames} title + {v.steps} steps), {v.width}x{v.height} "
-          f"at {v.fps:g} fps")
+    print(
+        f"wrote {v.path}{gif}: {v.frames} frames ({v.title_frames} title + {v.steps} steps), {v.width}x{v.height} "
+        f"at {v.fps:g} fps"
+    )

@@ -35,14 +35,15 @@ import math
 import os
 import stat
 import time
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import suppress
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any, BinaryIO, Callable, Iterable, Iterator
+from typing import IO, Any, BinaryIO
 
 from l3mvn.core.config import SUCCESS_RULES
-from l3mvn.core.json_values import json_safe
 from l3mvn.core.errors import L3MVNError, first_line
+from l3mvn.core.json_values import json_safe
 from l3mvn.run.eval.job import is_error_row
 from l3mvn.world.task.scoring import FAILURE_CAUSES
 
@@ -52,6 +53,7 @@ MAX_DEPTH = 32  # a row nests its config sections and timings a few levels deep
 
 
 # --- the row schema ----------------------------------------------------------------------------
+
 
 def _text(v: Any) -> bool:
     return isinstance(v, str) and v != ""
@@ -107,6 +109,7 @@ def _shown(value: Any) -> str:
 
 
 # --- lines -------------------------------------------------------------------------------------
+
 
 @dataclass(frozen=True)
 class ResultLine:
@@ -209,8 +212,13 @@ def open_regular(path: Path, what: str) -> BinaryIO:
     kind = stat.S_IFMT(os.fstat(fd).st_mode)
     if kind != stat.S_IFREG:
         os.close(fd)
-        shown = {stat.S_IFDIR: "a folder", stat.S_IFIFO: "a FIFO", stat.S_IFCHR: "a device",
-                 stat.S_IFBLK: "a device", stat.S_IFSOCK: "a socket"}.get(kind, "not a regular file")
+        shown = {
+            stat.S_IFDIR: "a folder",
+            stat.S_IFIFO: "a FIFO",
+            stat.S_IFCHR: "a device",
+            stat.S_IFBLK: "a device",
+            stat.S_IFSOCK: "a socket",
+        }.get(kind, "not a regular file")
         raise L3MVNError(f"{what} {_name(path)} is {shown}, not a regular file")
     os.set_blocking(fd, True)
     return os.fdopen(fd, "rb")
@@ -251,6 +259,7 @@ def _shorter(text: str) -> str:
 
 
 # --- reading back for --resume -----------------------------------------------------------------
+
 
 @dataclass
 class Previous:
@@ -295,8 +304,12 @@ def _retried(row: Any) -> bool:
 
 def _foreign(row: Any, policy: str, config_hash: str) -> bool:
     """A row that says it belongs to another policy or config: not this run's business."""
-    return (isinstance(row, dict) and _text(row.get("policy")) and _text(row.get("config_hash"))
-            and (row["policy"], row["config_hash"]) != (policy, config_hash))
+    return (
+        isinstance(row, dict)
+        and _text(row.get("policy"))
+        and _text(row.get("config_hash"))
+        and (row["policy"], row["config_hash"]) != (policy, config_hash)
+    )
 
 
 def check_resumable(path: str | Path | None, resume: bool) -> None:
@@ -305,6 +318,7 @@ def check_resumable(path: str | Path | None, resume: bool) -> None:
 
 
 # --- the --out file ----------------------------------------------------------------------------
+
 
 class ResultWriter:
     """The ``--out`` file of one run, from open to close (see the module docstring): locked, its
@@ -372,8 +386,10 @@ class ResultWriter:
             if start is not None:
                 self._truncate(start)  # whatever part of this line reached the file, and only that
             if isinstance(exc, OSError):
-                raise L3MVNError(f"cannot write to {_name(self.path)}: {_reason(exc)}; the rows written before "
-                                 "are kept (--resume runs the rest)") from None
+                raise L3MVNError(
+                    f"cannot write to {_name(self.path)}: {_reason(exc)}; the rows written before "
+                    "are kept (--resume runs the rest)"
+                ) from None
             raise
 
     def close(self) -> None:
@@ -406,8 +422,10 @@ class ResultWriter:
         try:
             os.ftruncate(self._fd, size)
         except OSError as exc:
-            raise L3MVNError(f"cannot write to {_name(self.path)} and cannot cut back the partial line it "
-                             f"left ({_reason(exc)}); the next run sets it aside") from None
+            raise L3MVNError(
+                f"cannot write to {_name(self.path)} and cannot cut back the partial line it "
+                f"left ({_reason(exc)}); the next run sets it aside"
+            ) from None
 
     def _lines(self) -> Iterator[ResultLine]:
         assert self._fd is not None  # previous reads back only a file it holds
@@ -424,15 +442,17 @@ def _open(path: Path) -> int:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError):
-        raise L3MVNError(f"cannot create the folder of --out {_name(path)}: {_name(_file_in(path))} is a file, "
-                         "not a folder") from None
+        raise L3MVNError(
+            f"cannot create the folder of --out {_name(path)}: {_name(_file_in(path))} is a file, not a folder"
+        ) from None
     except OSError as exc:
         raise L3MVNError(f"cannot create the folder of --out {_name(path)}: {_reason(exc)}") from None
     try:
         return os.open(path, os.O_RDWR | os.O_APPEND | os.O_CREAT | os.O_CLOEXEC, 0o644)
     except IsADirectoryError:
-        raise L3MVNError(f"--out {_name(path)} is a directory; give a file such as "
-                         f"{_name(path / 'results.jsonl')}") from None
+        raise L3MVNError(
+            f"--out {_name(path)} is a directory; give a file such as {_name(path / 'results.jsonl')}"
+        ) from None
     except OSError as exc:
         raise L3MVNError(f"cannot open --out {_name(path)}: {_reason(exc)}") from None
 
@@ -449,13 +469,16 @@ def _lock(fd: int, path: Path) -> None:
     except BlockingIOError:
         holder = _lock_holder(fd)
         who = f"pid {holder}" if holder else "its lock is held"
-        raise L3MVNError(f"{_name(path)} is being written by another l3mvn eval ({who}); wait for it to "
-                         "finish or choose another --out") from None
+        raise L3MVNError(
+            f"{_name(path)} is being written by another l3mvn eval ({who}); wait for it to "
+            "finish or choose another --out"
+        ) from None
     except OSError as exc:
         if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.EINVAL):
             raise L3MVNError(f"cannot lock {_name(path)}: {_reason(exc)}") from None
-        raise L3MVNError(f"{_name(path)} is on a filesystem without file locks; choose an --out on a local "
-                         "disk") from None
+        raise L3MVNError(
+            f"{_name(path)} is on a filesystem without file locks; choose an --out on a local disk"
+        ) from None
 
 
 def _lock_holder(fd: int) -> int | None:
@@ -478,8 +501,10 @@ def _lock_holder(fd: int) -> int | None:
 def _check_looks_like_results(fd: int, path: Path) -> None:
     """Refuse to append to (let alone repair) a file that is not JSON lines: a mistyped --out."""
     if os.fstat(fd).st_size and os.pread(fd, 1, 0) != b"{":
-        raise L3MVNError(f"--out {_name(path)} is not an l3mvn results file (it does not start with a JSON "
-                         "row); choose another --out")
+        raise L3MVNError(
+            f"--out {_name(path)} is not an l3mvn results file (it does not start with a JSON "
+            "row); choose another --out"
+        )
 
 
 def _repair_tail(fd: int, path: Path) -> str | None:
@@ -497,8 +522,10 @@ def _repair_tail(fd: int, path: Path) -> str | None:
     kept = _set_aside(path, tail)
     os.ftruncate(fd, start)
     os.fsync(fd)
-    return (f"{_name(path)} ended in a torn line ({len(tail)} bytes, an interrupted write): moved it to "
-            f"{_name(kept)}; --resume runs its episode again")
+    return (
+        f"{_name(path)} ended in a torn line ({len(tail)} bytes, an interrupted write): moved it to "
+        f"{_name(kept)}; --resume runs its episode again"
+    )
 
 
 def _last_line_start(fd: int, size: int) -> int:
@@ -528,8 +555,10 @@ def _set_aside(path: Path, tail: bytes) -> Path:
         except FileExistsError:
             continue
         except OSError as exc:
-            raise L3MVNError(f"{_name(path)} ends in a torn line and it cannot be set aside in {_name(kept)} "
-                             f"({_reason(exc)}); delete its last line by hand") from None
+            raise L3MVNError(
+                f"{_name(path)} ends in a torn line and it cannot be set aside in {_name(kept)} "
+                f"({_reason(exc)}); delete its last line by hand"
+            ) from None
     raise L3MVNError(f"{_name(path)} ends in a torn line and {_name(path)}.torn-{stamp}* are all taken")
 
 

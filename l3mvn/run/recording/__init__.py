@@ -28,7 +28,6 @@ from l3mvn.run.recording.drawing import VideoOptions
 from l3mvn.run.recording.layout import MapBounds, default_blueprint, map_view_bounds
 from l3mvn.run.recording.recorded import read_episode
 from l3mvn.run.recording.recorder import Recorder
-from l3mvn.run.recording.video import VideoResult, export_video
 from l3mvn.run.recording.replay import (
     DEFAULT_WEB_PORT,
     add_replay_arguments,
@@ -36,10 +35,30 @@ from l3mvn.run.recording.replay import (
     viewer_executable,
     web_viewer_url,
 )
+from l3mvn.run.recording.video import VideoResult, export_video
 
 __all__ = [
-    "APPLICATION_ID", "DEFAULT_WEB_PORT", "TIMELINE", "MapBounds", "Recorder", "RecordingInfo", "RecordingSummary",
-    "VideoOptions", "VideoResult", "add_replay_arguments", "default_blueprint", "export_video", "find_recording",
-    "list_recordings", "map_view_bounds", "open_recording", "parse_recording_name", "read_episode", "read_recording",
-    "recording_path", "run_replay", "viewer_executable", "web_viewer_url",
+    "APPLICATION_ID",
+    "DEFAULT_WEB_PORT",
+    "TIMELINE",
+    "MapBounds",
+    "Recorder",
+    "RecordingInfo",
+    "RecordingSummary",
+    "VideoOptions",
+    "VideoResult",
+    "add_replay_arguments",
+    "default_blueprint",
+    "export_video",
+    "find_recording",
+    "list_recordings",
+    "map_view_bounds",
+    "open_recording",
+    "parse_recording_name",
+    "read_episode",
+    "read_recording",
+    "recording_path",
+    "run_replay",
+    "viewer_executable",
+    "web_viewer_url",
 ]

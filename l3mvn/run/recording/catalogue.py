@@ -29,13 +29,18 @@ _RRD_MESSAGE = struct.Struct("<QQ")
 _RRD_END = 0
 
 
-def recording_path(recordings_dir: str | Path, dataset: str | Path, scene: str, episode_id: int,
-                   policy: str, tag: str | None = None) -> Path:
+def recording_path(
+    recordings_dir: str | Path, dataset: str | Path, scene: str, episode_id: int, policy: str, tag: str | None = None
+) -> Path:
     """``<dir>/<dataset>_<scene>_<episode>_<policy>[_<tag>].rrd``; a dataset path contributes its folder
     name, and anything but letters, digits, '.' and '-' becomes '-' so the name parses back
     unambiguously. ``tag`` tells apart several recordings of one episode (``unique_tag``)."""
-    parts = [recording_name_part(Path(str(dataset)).name or str(dataset)), recording_name_part(scene),
-             str(int(episode_id)), recording_name_part(policy)]
+    parts = [
+        recording_name_part(Path(str(dataset)).name or str(dataset)),
+        recording_name_part(scene),
+        str(int(episode_id)),
+        recording_name_part(policy),
+    ]
     if tag is not None:
         parts.append(recording_name_part(tag))
     return Path(recordings_dir) / ("_".join(parts) + ".rrd")
@@ -61,9 +66,17 @@ class RecordingInfo:
     tag: str | None = None  # the name's fifth part: one of several recordings of the episode (a re-run)
 
     def to_dict(self) -> dict:
-        return {"path": str(self.path), "name": self.path.name, "dataset": self.dataset, "scene": self.scene,
-                "episode_id": self.episode_id, "policy": self.policy, "tag": self.tag,
-                "size_bytes": self.size_bytes, "mtime": self.mtime}
+        return {
+            "path": str(self.path),
+            "name": self.path.name,
+            "dataset": self.dataset,
+            "scene": self.scene,
+            "episode_id": self.episode_id,
+            "policy": self.policy,
+            "tag": self.tag,
+            "size_bytes": self.size_bytes,
+            "mtime": self.mtime,
+        }
 
 
 def parse_recording_name(path: str | Path) -> tuple[str, str, int, str, str | None] | None:
@@ -130,8 +143,10 @@ class RecordingCut(L3MVNError):
 
     def __init__(self, path: Path, intact_bytes: int, total_bytes: int) -> None:
         self.path, self.intact_bytes, self.total_bytes = path, intact_bytes, total_bytes
-        super().__init__(f"{path} ends inside a message (cut off mid-write, or still being written): its "
-                         f"last {self.lost_bytes} of {total_bytes} bytes are incomplete")
+        super().__init__(
+            f"{path} ends inside a message (cut off mid-write, or still being written): its "
+            f"last {self.lost_bytes} of {total_bytes} bytes are incomplete"
+        )
 
     @property
     def lost_bytes(self) -> int:
@@ -174,8 +189,9 @@ def read_recording(path: str | Path, *, cut_ok: bool = False) -> RecordingSummar
             try:
                 summary = _summarise(_reader(prefix), p)
             except L3MVNError:  # rerun's reason names the temporary copy: of no use to the reader
-                raise L3MVNError(f"{cut}, and the {cut.intact_bytes} bytes before it hold no readable "
-                                 "recording") from None
+                raise L3MVNError(
+                    f"{cut}, and the {cut.intact_bytes} bytes before it hold no readable recording"
+                ) from None
         return replace(summary, lost_bytes=cut.lost_bytes)
 
 
@@ -206,8 +222,13 @@ def _summarise(reader: RrdReader, path: Path) -> RecordingSummary:
     except (RuntimeError, ValueError, OSError) as exc:
         raise L3MVNError(f"{path} is not a readable rerun recording: {first_line(exc)}") from None
     entities.discard(reader_path(PROPERTIES))
-    return RecordingSummary(path, entry.application_id, entry.recording_id, tuple(sorted(entities)),
-                            tuple(sorted(s for s in steps if s is not None)))
+    return RecordingSummary(
+        path,
+        entry.application_id,
+        entry.recording_id,
+        tuple(sorted(entities)),
+        tuple(sorted(s for s in steps if s is not None)),
+    )
 
 
 def _intact_length(path: Path) -> int | None:

@@ -100,7 +100,7 @@ def frames(ep: RecordedEpisode, options: VideoOptions, *, title_frames: int | No
         frame[:] = PANEL_BG
         frame[: geo.panel, : geo.camera_w] = _camera(s, geo)
         x0 = geo.camera_w + _GAP
-        frame[: geo.panel, x0: x0 + geo.map_w] = _map_panel(ep, s, lut, (geo.map_w, geo.panel))
+        frame[: geo.panel, x0 : x0 + geo.map_w] = _map_panel(ep, s, lut, (geo.map_w, geo.panel))
         _band(frame, geo, ep, s, last)
         yield frame
 
@@ -135,10 +135,9 @@ def _map_panel(ep: RecordedEpisode, s: RecordedStep, lut: np.ndarray, size: tupl
         r, c, win = s.map_ids
         top, bottom = max(r, r0), min(r + win.shape[0], r1)
         left, right = max(c, c0), min(c + win.shape[1], c1)
-        ids[top - r0: bottom - r0, left - c0: right - c0] = win[top - r: bottom - r, left - c: right - c]
+        ids[top - r0 : bottom - r0, left - c0 : right - c0] = win[top - r : bottom - r, left - c : right - c]
     k = size[1] / (r1 - r0)
-    img = np.ascontiguousarray(cv2.resize(lut[np.minimum(ids, len(lut) - 1)], size,
-                                          interpolation=cv2.INTER_NEAREST))
+    img = np.ascontiguousarray(cv2.resize(lut[np.minimum(ids, len(lut) - 1)], size, interpolation=cv2.INTER_NEAREST))
 
     def px(xy: np.ndarray) -> np.ndarray:
         return np.round((xy - (c0, r0)) * k).astype(np.int32)
@@ -200,9 +199,19 @@ def _place_label(img: np.ndarray, text: str, at: tuple[int, int], placed: list, 
     (tw, th), base = cv2.getTextSize(text, FONT, 0.45, 1)
     x, y = at
     h, w = img.shape[:2]
-    boxes = [(x + dx - 2, y + dy - th - 2, x + dx + tw + 2, y + dy + base + 1)
-             for dx, dy in ((8, 4), (-tw - 8, 4), (-tw // 2, -10), (-tw // 2, th + 12), (8, -14), (8, th + 14),
-                            (-tw - 8, -14), (-tw - 8, th + 14))]
+    boxes = [
+        (x + dx - 2, y + dy - th - 2, x + dx + tw + 2, y + dy + base + 1)
+        for dx, dy in (
+            (8, 4),
+            (-tw - 8, 4),
+            (-tw // 2, -10),
+            (-tw // 2, th + 12),
+            (8, -14),
+            (8, th + 14),
+            (-tw - 8, -14),
+            (-tw - 8, th + 14),
+        )
+    ]
     inside = [b for b in boxes if b[0] >= 0 and b[1] >= 0 and b[2] < w and b[3] < h]
     clear = [b for b in inside if all(b[2] < p[0] or b[0] > p[2] or b[3] < p[1] or b[1] > p[3] for p in placed)]
     box = (clear or inside or [_shift_inside(boxes[0], w, h)])[0]
@@ -232,7 +241,7 @@ def _colour_bar(img: np.ndarray) -> None:
     bar = score_colors(np.linspace(0, 1, w))
     y0, x0 = h - 26, 34
     cv2.rectangle(img, (4, y0 - 18), (x0 + w + 26, h - 4), (20, 20, 20), -1)
-    img[y0: y0 + 10, x0: x0 + w] = bar[None]
+    img[y0 : y0 + 10, x0 : x0 + w] = bar[None]
     cv2.putText(img, "0", (x0 - 14, y0 + 10), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
     cv2.putText(img, "1", (x0 + w + 6, y0 + 10), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
     cv2.putText(img, "frontier score", (x0, y0 - 5), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
@@ -244,12 +253,28 @@ def _band(frame: np.ndarray, geo: FrameGeometry, ep: RecordedEpisode, s: Recorde
     y = geo.panel + int(geo.line * 0.38)
     head = f"step {s.step}/{last}   find: {s.goal}   {ep.policy} on {ep.scene} #{ep.episode_id}"
     cv2.putText(frame, head, (10, y), FONT, scale, TEXT_RGB, 1, cv2.LINE_AA)
-    cv2.putText(frame, fit_text(s.decision, geo.width - 20, scale * 0.85), (10, y + int(geo.line * 0.4)), FONT,
-                scale * 0.85, _DIM, 1, cv2.LINE_AA)
+    cv2.putText(
+        frame,
+        fit_text(s.decision, geo.width - 20, scale * 0.85),
+        (10, y + int(geo.line * 0.4)),
+        FONT,
+        scale * 0.85,
+        _DIM,
+        1,
+        cv2.LINE_AA,
+    )
     if s.fusion:  # in its own row under the others: their pixels stay as a recording without one draws them
         baseline = geo.panel + geo.line + int((geo.band - geo.line) * 0.7)
-        cv2.putText(frame, fit_text(s.fusion, geo.width - 20, scale * 0.85), (10, baseline), FONT, scale * 0.85,
-                    _FUSION_RGB, 1, cv2.LINE_AA)
+        cv2.putText(
+            frame,
+            fit_text(s.fusion, geo.width - 20, scale * 0.85),
+            (10, baseline),
+            FONT,
+            scale * 0.85,
+            _FUSION_RGB,
+            1,
+            cv2.LINE_AA,
+        )
 
 
 def fit_text(text: str, width: int, scale: float) -> str:
@@ -269,10 +294,19 @@ def title_card(ep: RecordedEpisode, geo: FrameGeometry) -> np.ndarray:
     banner = geo.height // 4
     card[:banner] = _SUCCESS_RGB if outcome == "success" else (_FAILURE_RGB if ep.result else (110, 110, 110))
     title = {"success": "SUCCESS", "unfinished": "NO RESULT (recording cut short)"}.get(
-        outcome, f"FAILURE: {outcome.removeprefix('fail_').replace('_', ' ')}")
+        outcome, f"FAILURE: {outcome.removeprefix('fail_').replace('_', ' ')}"
+    )
     scale = geo.height / 360
-    cv2.putText(card, fit_text(title, geo.width - 40, scale * 1.1), (20, banner // 2 + int(12 * scale)), FONT,
-                scale * 1.1, (255, 255, 255), 2, cv2.LINE_AA)
+    cv2.putText(
+        card,
+        fit_text(title, geo.width - 40, scale * 1.1),
+        (20, banner // 2 + int(12 * scale)),
+        FONT,
+        scale * 1.1,
+        (255, 255, 255),
+        2,
+        cv2.LINE_AA,
+    )
     r = ep.result
     goal = ep.steps[0].goal if ep.steps else "?"
     lines = [f"find a {goal} in {ep.scene} (episode {ep.episode_id}, {ep.dataset})", f"policy: {ep.policy}"]
@@ -282,8 +316,16 @@ def title_card(ep: RecordedEpisode, geo: FrameGeometry) -> np.ndarray:
     lines.append("frames: L3MVN Studio's CPU renderer (flat-shaded)")
     for i, line in enumerate(lines):
         colour = _DIM if i == len(lines) - 1 else TEXT_RGB
-        cv2.putText(card, fit_text(line, geo.width - 40, scale * 0.6), (20, banner + int((40 + 34 * i) * scale)), FONT,
-                    scale * 0.6, colour, 1, cv2.LINE_AA)
+        cv2.putText(
+            card,
+            fit_text(line, geo.width - 40, scale * 0.6),
+            (20, banner + int((40 + 34 * i) * scale)),
+            FONT,
+            scale * 0.6,
+            colour,
+            1,
+            cv2.LINE_AA,
+        )
     return card
 
 

@@ -14,8 +14,19 @@ import numpy as np
 import rerun.blueprint as rrb
 
 from l3mvn.run.recording.entities import (
-    CAMERA_DEPTH, CAMERA_RGB, CAMERA_SEMANTIC, EPISODE, LANGUAGE_CHOSEN, LOG, MAP, METRICS_CHOSEN_FRONTIER,
-    METRICS_FRONTIER_SCORES, METRICS_FRONTIERS, METRICS_GROUND_TRUTH, METRICS_TIMINGS_MS, WORLD,
+    CAMERA_DEPTH,
+    CAMERA_RGB,
+    CAMERA_SEMANTIC,
+    EPISODE,
+    LANGUAGE_CHOSEN,
+    LOG,
+    MAP,
+    METRICS_CHOSEN_FRONTIER,
+    METRICS_FRONTIER_SCORES,
+    METRICS_FRONTIERS,
+    METRICS_GROUND_TRUTH,
+    METRICS_TIMINGS_MS,
+    WORLD,
 )
 
 # The colours of a recording, shared by the recorder and the videos made from it.

@@ -18,11 +18,38 @@ import numpy as np
 from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.run.recording.catalogue import TIMELINE, open_recording
 from l3mvn.run.recording.entities import (
-    ANNOTATION_CONTEXT, ARROWS_VECTORS, BOXES_CENTERS, BOXES_HALF_SIZES, CAMERA_RGB, CAMERA_RGB_TARGET, CLEAR, EPISODE,
-    IMAGE_BUFFER, IMAGE_FORMAT, LOG_DECISIONS, LOG_EPISODE, LOG_FUSION, MAP, MAP_AGENT, MAP_COLLISION_MARKS,
-    MAP_FRONTIER_CELLS, MAP_FRONTIERS, MAP_GOAL, MAP_SEMANTIC, MAP_TARGET, MAP_TRAJECTORY, POINTS_COLORS,
-    POINTS_LABELS, POINTS_POSITIONS, POINTS_RADII, SEGMENTATION_BUFFER, SEGMENTATION_FORMAT, STRIPS, TEXT_DOCUMENT,
-    TEXT_LOG, reader_path,
+    ANNOTATION_CONTEXT,
+    ARROWS_VECTORS,
+    BOXES_CENTERS,
+    BOXES_HALF_SIZES,
+    CAMERA_RGB,
+    CAMERA_RGB_TARGET,
+    CLEAR,
+    EPISODE,
+    IMAGE_BUFFER,
+    IMAGE_FORMAT,
+    LOG_DECISIONS,
+    LOG_EPISODE,
+    LOG_FUSION,
+    MAP,
+    MAP_AGENT,
+    MAP_COLLISION_MARKS,
+    MAP_FRONTIER_CELLS,
+    MAP_FRONTIERS,
+    MAP_GOAL,
+    MAP_SEMANTIC,
+    MAP_TARGET,
+    MAP_TRAJECTORY,
+    POINTS_COLORS,
+    POINTS_LABELS,
+    POINTS_POSITIONS,
+    POINTS_RADII,
+    SEGMENTATION_BUFFER,
+    SEGMENTATION_FORMAT,
+    STRIPS,
+    TEXT_DOCUMENT,
+    TEXT_LOG,
+    reader_path,
 )
 from l3mvn.run.recording.layout import VIEW_MARGIN
 
@@ -185,8 +212,10 @@ class _LatestAt:
 def _assemble(path: Path, events: dict) -> RecordedEpisode:
     if not events[MAP_SEMANTIC]:
         policy = _card_field(events, "policy") or "its policy"
-        raise L3MVNError(f"{path} holds no map ({policy} keeps none): a video needs a map-based policy's "
-                         "recording (e.g. frontier, cost-utility, l3mvn-zs)")
+        raise L3MVNError(
+            f"{path} holds no map ({policy} keeps none): a video needs a map-based policy's "
+            "recording (e.g. frontier, cost-utility, l3mvn-zs)"
+        )
     if not events[CAMERA_RGB]:
         raise L3MVNError(f"{path} holds no camera frames: nothing to export")
     card = _texts(events, EPISODE, TEXT_DOCUMENT)
@@ -195,12 +224,20 @@ def _assemble(path: Path, events: dict) -> RecordedEpisode:
     goal = _match(r"\* goal: \*\*(.+?)\*\*", first) or "?"
     result = dict(re.findall(r"^\| (\w+) \| (.*?) \|$", card[-1][1], re.MULTILINE)) if len(card) > 1 else {}
     result.pop("result", None)
-    ep = RecordedEpisode(path=path, scene=head.group(1) if head else path.stem,
-                         episode_id=head.group(2) if head else "?", dataset=_card_field(events, "dataset") or "?",
-                         policy=_card_field(events, "policy") or "?", result=result,
-                         classes=_classes(events[MAP]))
-    goals = {s: m.group(1) for s, t in _texts(events, LOG_EPISODE, TEXT_LOG)
-             if (m := re.search(r"target changed to (.+)$", t))}
+    ep = RecordedEpisode(
+        path=path,
+        scene=head.group(1) if head else path.stem,
+        episode_id=head.group(2) if head else "?",
+        dataset=_card_field(events, "dataset") or "?",
+        policy=_card_field(events, "policy") or "?",
+        result=result,
+        classes=_classes(events[MAP]),
+    )
+    goals = {
+        s: m.group(1)
+        for s, t in _texts(events, LOG_EPISODE, TEXT_LOG)
+        if (m := re.search(r"target changed to (.+)$", t))
+    }
     decisions = {s: t for s, t in _texts(events, LOG_DECISIONS, TEXT_LOG)}
     latest = {e: _LatestAt(rows) for e, rows in events.items()}
     boxes = []
@@ -212,16 +249,24 @@ def _assemble(path: Path, events: dict) -> RecordedEpisode:
         strips, marks = latest[MAP_TRAJECTORY].at(step), latest[MAP_COLLISION_MARKS].at(step)
         target = latest[CAMERA_RGB_TARGET].at(step)
         fusion = latest[LOG_FUSION].at(step)  # logged when the rule in force changes, so it holds until then
-        ep.steps.append(RecordedStep(
-            step=step, rgb_png=_png(latest[CAMERA_RGB].at(step)), goal=goal,
-            decision=decisions.get(step, "reset: the episode starts" if step == 0 else ""),
-            fusion="" if fusion is None else fusion[TEXT_LOG][0], map_ids=ids,
-            frontiers=_marks(frontiers), frontier_cells=_marks(cells),
-            collision_marks=None if marks is None else marks.get(POINTS_POSITIONS),
-            trajectory=None if strips is None else strips[STRIPS],
-            agent=None if agent is None else (agent[POINTS_POSITIONS][0], agent[ARROWS_VECTORS][0]),
-            goal_mark=_marks(goal_mark),
-            camera_boxes=_boxes(target), map_boxes=_boxes(latest[MAP_TARGET].at(step))))
+        ep.steps.append(
+            RecordedStep(
+                step=step,
+                rgb_png=_png(latest[CAMERA_RGB].at(step)),
+                goal=goal,
+                decision=decisions.get(step, "reset: the episode starts" if step == 0 else ""),
+                fusion="" if fusion is None else fusion[TEXT_LOG][0],
+                map_ids=ids,
+                frontiers=_marks(frontiers),
+                frontier_cells=_marks(cells),
+                collision_marks=None if marks is None else marks.get(POINTS_POSITIONS),
+                trajectory=None if strips is None else strips[STRIPS],
+                agent=None if agent is None else (agent[POINTS_POSITIONS][0], agent[ARROWS_VECTORS][0]),
+                goal_mark=_marks(goal_mark),
+                camera_boxes=_boxes(target),
+                map_boxes=_boxes(latest[MAP_TARGET].at(step)),
+            )
+        )
         if ids is not None:
             r, c, win = ids
             boxes.append((r, r + win.shape[0], c, c + win.shape[1]))
@@ -290,7 +335,7 @@ def _map_window(row: dict | None) -> tuple[int, int, np.ndarray] | None:
     rows, cols = np.flatnonzero(ids.any(axis=1)), np.flatnonzero(ids.any(axis=0))
     if rows.size == 0:
         return None
-    return int(rows[0]), int(cols[0]), ids[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1].copy()
+    return int(rows[0]), int(cols[0]), ids[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1].copy()
 
 
 def _map_size(rows: list) -> tuple[int, int]:
@@ -306,8 +351,12 @@ def _marks(row: dict | None) -> MapMarks | None:
     rgb = row.get(POINTS_COLORS, np.zeros((1, 3), np.uint8))
     labels = list(row.get(POINTS_LABELS) or [])
     radii = row.get(POINTS_RADII, np.ones(1, np.float32))
-    return MapMarks(xy, np.broadcast_to(rgb, (n, 3)), (labels + [_UNLABELLED] * n)[:n] if len(labels) != 1 or n == 1
-                    else labels * n, np.broadcast_to(radii, (n,)))
+    return MapMarks(
+        xy,
+        np.broadcast_to(rgb, (n, 3)),
+        (labels + [_UNLABELLED] * n)[:n] if len(labels) != 1 or n == 1 else labels * n,
+        np.broadcast_to(radii, (n,)),
+    )
 
 
 def _crop(boxes: list, size: tuple[int, int]) -> tuple[int, int, int, int]:

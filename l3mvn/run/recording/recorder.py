@@ -21,18 +21,52 @@ from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.run.events import EventBus, StepEvent
 from l3mvn.run.recording.catalogue import APPLICATION_ID, TIMELINE, recording_gap, recording_path
 from l3mvn.run.recording.entities import (
-    CAMERA, CAMERA_DEPTH, CAMERA_RGB, CAMERA_RGB_TARGET, CAMERA_SEMANTIC, CAMERA_SEMANTIC_TARGET, EPISODE,
-    LANGUAGE_CHOSEN, LANGUAGE_CHOSEN_METRES, LOG_DECISIONS, LOG_EPISODE, LOG_FUSION, LOG_LANGUAGE, MAP, MAP_AGENT,
-    MAP_COLLISION_MARKS, MAP_FRONTIER_CELLS, MAP_FRONTIERS, MAP_GOAL, MAP_SEMANTIC, MAP_SHORT_TERM_GOAL, MAP_TARGET,
-    MAP_TRAJECTORY, METRICS_CHOSEN_FRONTIER, METRICS_FRONTIER_SCORES, METRICS_FRONTIERS, METRICS_GROUND_TRUTH,
-    METRICS_TIMINGS_MS, WORLD_AGENT, WORLD_AGENT_BODY, WORLD_GOAL, WORLD_TRAJECTORY, language_by_goal,
+    CAMERA,
+    CAMERA_DEPTH,
+    CAMERA_RGB,
+    CAMERA_RGB_TARGET,
+    CAMERA_SEMANTIC,
+    CAMERA_SEMANTIC_TARGET,
+    EPISODE,
+    LANGUAGE_CHOSEN,
+    LANGUAGE_CHOSEN_METRES,
+    LOG_DECISIONS,
+    LOG_EPISODE,
+    LOG_FUSION,
+    LOG_LANGUAGE,
+    MAP,
+    MAP_AGENT,
+    MAP_COLLISION_MARKS,
+    MAP_FRONTIER_CELLS,
+    MAP_FRONTIERS,
+    MAP_GOAL,
+    MAP_SEMANTIC,
+    MAP_SHORT_TERM_GOAL,
+    MAP_TARGET,
+    MAP_TRAJECTORY,
+    METRICS_CHOSEN_FRONTIER,
+    METRICS_FRONTIER_SCORES,
+    METRICS_FRONTIERS,
+    METRICS_GROUND_TRUTH,
+    METRICS_TIMINGS_MS,
+    WORLD_AGENT,
+    WORLD_AGENT_BODY,
+    WORLD_GOAL,
+    WORLD_TRAJECTORY,
+    language_by_goal,
 )
 from l3mvn.run.recording.layout import (
-    AGENT_RGB, GOAL_RGB, LABELLED_FRONTIERS, TARGET_RGB, MapBounds,
-    default_blueprint, map_view_bounds, score_colors,
+    AGENT_RGB,
+    GOAL_RGB,
+    LABELLED_FRONTIERS,
+    TARGET_RGB,
+    MapBounds,
+    default_blueprint,
+    map_view_bounds,
+    score_colors,
 )
-from l3mvn.world.episode import Episode
 from l3mvn.run.viz import BACKGROUND_RGB, COLLISION_RGB, category_color, category_palette
+from l3mvn.world.episode import Episode
 
 log = logging.getLogger(__name__)
 
@@ -58,8 +92,16 @@ class Recorder:
     (flushed, footer written) on the ``done`` event or ``close()``; later events are ignored.
     """
 
-    def __init__(self, path: str | Path, *, dataset: str, scene: str, episode_id: int, policy: str,
-                 application_id: str = APPLICATION_ID) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        dataset: str,
+        scene: str,
+        episode_id: int,
+        policy: str,
+        application_id: str = APPLICATION_ID,
+    ) -> None:
         self.path = Path(path)
         self.meta = {"dataset": str(dataset), "scene": scene, "episode_id": int(episode_id), "policy": policy}
         _check_room(self.path)
@@ -100,14 +142,20 @@ class Recorder:
         self.log_ms: list[float] = []  # this recorder's own cost per event, for budgets and benchmarks
 
     @classmethod
-    def for_episode(cls, recordings_dir: str | Path, dataset: str | Path, episode: Episode,
-                    policy: str, tag: str | None = None) -> "Recorder":
+    def for_episode(
+        cls, recordings_dir: str | Path, dataset: str | Path, episode: Episode, policy: str, tag: str | None = None
+    ) -> Recorder:
         """A recorder writing to ``recording_path(recordings_dir, dataset, ..., tag)`` for ``episode``."""
         path = recording_path(recordings_dir, dataset, episode.scene, episode.episode_id, policy, tag)
-        return cls(path, dataset=Path(str(dataset)).name or str(dataset), scene=episode.scene,
-                   episode_id=episode.episode_id, policy=policy)
+        return cls(
+            path,
+            dataset=Path(str(dataset)).name or str(dataset),
+            scene=episode.scene,
+            episode_id=episode.episode_id,
+            policy=policy,
+        )
 
-    def attach(self, bus: EventBus) -> "Recorder":
+    def attach(self, bus: EventBus) -> Recorder:
         """Subscribe to ``bus``; the recorder unsubscribes itself when it closes."""
         self._unsubscribe = bus.subscribe(self)
         return self
@@ -158,8 +206,7 @@ class Recorder:
             except Exception:  # a recording problem must never end an episode
                 self._errors += 1
                 if self._errors == 1:
-                    log.exception("recorder %s failed at step %d; later failures are counted", self.path,
-                                  event.step)
+                    log.exception("recorder %s failed at step %d; later failures are counted", self.path, event.step)
             self.log_ms.append((time.perf_counter() - t0) * 1e3)
             if event.done:
                 self._close_locked()
@@ -221,36 +268,51 @@ class Recorder:
     def _log_camera_context(self, categories: tuple[str, ...]) -> None:
         palette = category_palette(categories)
         classes = [rr.ClassDescription(info=rr.AnnotationInfo(id=0, label="background", color=BACKGROUND_RGB))]
-        classes += [rr.ClassDescription(info=rr.AnnotationInfo(id=k + 1, label=name, color=tuple(palette[k + 1])))
-                    for k, name in enumerate(categories)]
+        classes += [
+            rr.ClassDescription(info=rr.AnnotationInfo(id=k + 1, label=name, color=tuple(palette[k + 1])))
+            for k, name in enumerate(categories)
+        ]
         self._rec.log(CAMERA, rr.AnnotationContext(classes), static=True)
         self._camera_categories = categories
 
     def _log_map_context(self, names: tuple[str, ...]) -> None:
         palette = category_palette(names)
         n = len(_MAP_CLASSES)
-        classes = [rr.ClassDescription(info=rr.AnnotationInfo(id=i, label=label, color=rgb))
-                   for i, (label, rgb) in enumerate(_MAP_CLASSES)]
-        classes += [rr.ClassDescription(info=rr.AnnotationInfo(id=n + k, label=name, color=tuple(palette[k + 1])))
-                    for k, name in enumerate(names)]
+        classes = [
+            rr.ClassDescription(info=rr.AnnotationInfo(id=i, label=label, color=rgb))
+            for i, (label, rgb) in enumerate(_MAP_CLASSES)
+        ]
+        classes += [
+            rr.ClassDescription(info=rr.AnnotationInfo(id=n + k, label=name, color=tuple(palette[k + 1])))
+            for k, name in enumerate(names)
+        ]
         self._rec.log(MAP, rr.AnnotationContext(classes), static=True)
         self._map_categories = names
 
     def _log_episode_card(self, ev: StepEvent) -> None:
         m = self.meta
-        text = (f"# {m['scene']} episode {m['episode_id']}\n\n"
-                f"* dataset: `{m['dataset']}`\n* policy: `{m['policy']}`\n* goal: **{ev.goal}**\n"
-                f"* episode key: `{ev.episode_key}`\n")
+        text = (
+            f"# {m['scene']} episode {m['episode_id']}\n\n"
+            f"* dataset: `{m['dataset']}`\n* policy: `{m['policy']}`\n* goal: **{ev.goal}**\n"
+            f"* episode key: `{ev.episode_key}`\n"
+        )
         self._rec.log(EPISODE, rr.TextDocument(text, media_type="text/markdown"))
         self._rec.log(LOG_EPISODE, rr.TextLog(f"episode {ev.episode_key}: find {ev.goal} ({m['policy']})"))
 
     def _log_world(self, ev: StepEvent) -> None:
         rec, pose = self._rec, ev.pose
         if not self._world_xyz:
-            rec.log(WORLD_AGENT_BODY, rr.Arrows3D(origins=[[0.0, 0.0, 0.3]], vectors=[[0.4, 0.0, 0.0]],
-                                                  colors=[AGENT_RGB]), static=True)
-        rec.log(WORLD_AGENT, rr.Transform3D(translation=[pose.x, pose.y, 0.0],
-                                            rotation=rr.RotationAxisAngle(axis=[0, 0, 1], radians=pose.heading)))
+            rec.log(
+                WORLD_AGENT_BODY,
+                rr.Arrows3D(origins=[[0.0, 0.0, 0.3]], vectors=[[0.4, 0.0, 0.0]], colors=[AGENT_RGB]),
+                static=True,
+            )
+        rec.log(
+            WORLD_AGENT,
+            rr.Transform3D(
+                translation=[pose.x, pose.y, 0.0], rotation=rr.RotationAxisAngle(axis=[0, 0, 1], radians=pose.heading)
+            ),
+        )
         here = (pose.x, pose.y, 0.05)
         if not self._world_xyz or self._world_xyz[-1] != here:
             self._world_xyz.append(here)
@@ -292,8 +354,7 @@ class Recorder:
         per goal as lines F<id>."""
         self._log_series(LANGUAGE_CHOSEN, {} if chosen is None else chosen.llm_scores, colors=category_color)
         if any(f.expected_m for f in frontiers):
-            self._log_series(LANGUAGE_CHOSEN_METRES, {} if chosen is None else chosen.expected_m,
-                             colors=category_color)
+            self._log_series(LANGUAGE_CHOSEN_METRES, {} if chosen is None else chosen.expected_m, colors=category_color)
         by_goal: dict[str, dict[str, float]] = {}
         for f in frontiers:
             for goal, p in f.llm_scores.items():
@@ -309,8 +370,11 @@ class Recorder:
         grown = [k for k in values if k not in keys]
         if grown:
             keys.extend(grown)
-            self._rec.log(entity, rr.SeriesLines(names=keys, colors=None if colors is None else
-                                                 [colors(k) for k in keys]), static=True)
+            self._rec.log(
+                entity,
+                rr.SeriesLines(names=keys, colors=None if colors is None else [colors(k) for k in keys]),
+                static=True,
+            )
         if keys:
             row = [float(values.get(k, math.nan)) for k in keys]
             self._rec.log(entity, rr.Scalars([v if math.isfinite(v) else math.nan for v in row]))
@@ -334,8 +398,11 @@ class Recorder:
             self._map_xy.append(here)
             rec.log(MAP_TRAJECTORY, rr.LineStrips2D([self._map_xy], colors=[AGENT_RGB], radii=[0.6]))
         heading = (math.cos(m.agent_heading) * 8.0, math.sin(m.agent_heading) * 8.0)
-        rec.log(MAP_AGENT, rr.Points2D([here], colors=[AGENT_RGB], radii=[3.0]),
-                rr.Arrows2D(origins=[here], vectors=[heading], colors=[AGENT_RGB]))
+        rec.log(
+            MAP_AGENT,
+            rr.Points2D([here], colors=[AGENT_RGB], radii=[3.0]),
+            rr.Arrows2D(origins=[here], vectors=[heading], colors=[AGENT_RGB]),
+        )
 
         self._log_goal(d)
         self._log_collision_marks(d.collision_marks)
@@ -373,8 +440,10 @@ class Recorder:
         mins = [(c0, r0) for r0, r1, c0, c1 in boxes]
         sizes = [(c1 - c0, r1 - r0) for r0, r1, c0, c1 in boxes]
         labels = [f"target: {goal}"] + [""] * (len(boxes) - 1)
-        self._rec.log(MAP_TARGET, rr.Boxes2D(mins=mins, sizes=sizes, colors=[TARGET_RGB], radii=[0.8],
-                                             labels=labels, show_labels=True))
+        self._rec.log(
+            MAP_TARGET,
+            rr.Boxes2D(mins=mins, sizes=sizes, colors=[TARGET_RGB], radii=[0.8], labels=labels, show_labels=True),
+        )
 
     def _log_camera_target(self, obs, goal: str) -> None:
         """The target's pixels boxed in the RGB and semantic frames (what the detector reports)."""
@@ -385,10 +454,17 @@ class Recorder:
                 self._clear(entity)
                 continue
             self._cleared[entity] = False
-            self._rec.log(entity, rr.Boxes2D(mins=[(c0, r0) for r0, r1, c0, c1 in boxes],
-                                             sizes=[(c1 - c0, r1 - r0) for r0, r1, c0, c1 in boxes],
-                                             colors=[TARGET_RGB], radii=[1.0],
-                                             labels=[goal] + [""] * (len(boxes) - 1), show_labels=True))
+            self._rec.log(
+                entity,
+                rr.Boxes2D(
+                    mins=[(c0, r0) for r0, r1, c0, c1 in boxes],
+                    sizes=[(c1 - c0, r1 - r0) for r0, r1, c0, c1 in boxes],
+                    colors=[TARGET_RGB],
+                    radii=[1.0],
+                    labels=[goal] + [""] * (len(boxes) - 1),
+                    show_labels=True,
+                ),
+            )
 
     def _log_goal(self, d) -> None:
         """The long-term goal as a cross drawn above the frontiers (it sits on the chosen one), labelled
@@ -400,11 +476,16 @@ class Recorder:
         x, y = d.long_term_goal[1] + 0.5, d.long_term_goal[0] + 0.5
         arm = _GOAL_ARM_CELLS
         label = None if d.chosen_frontier is not None else f"goal ({d.goal_kind})"
-        self._rec.log(MAP_GOAL, rr.Points2D([(x, y)], colors=[GOAL_RGB], radii=[1.2], draw_order=41,
-                                            labels=[label] if label else None),
-                      rr.LineStrips2D([[(x - arm, y - arm), (x + arm, y + arm)],
-                                       [(x - arm, y + arm), (x + arm, y - arm)]],
-                                      colors=[GOAL_RGB], radii=[0.8], draw_order=40))
+        self._rec.log(
+            MAP_GOAL,
+            rr.Points2D([(x, y)], colors=[GOAL_RGB], radii=[1.2], draw_order=41, labels=[label] if label else None),
+            rr.LineStrips2D(
+                [[(x - arm, y - arm), (x + arm, y + arm)], [(x - arm, y + arm), (x + arm, y - arm)]],
+                colors=[GOAL_RGB],
+                radii=[0.8],
+                draw_order=40,
+            ),
+        )
 
     def _log_collision_marks(self, marks: np.ndarray | None) -> None:
         """The cells the agent's failed steps blocked, written when they change: a replay shows what
@@ -416,8 +497,9 @@ class Recorder:
             self._clear(MAP_COLLISION_MARKS)
             return
         self._cleared[MAP_COLLISION_MARKS] = False
-        self._rec.log(MAP_COLLISION_MARKS, rr.Points2D(marks[:, ::-1] + 0.5, colors=[COLLISION_RGB], radii=[0.5],
-                                                       draw_order=30))
+        self._rec.log(
+            MAP_COLLISION_MARKS, rr.Points2D(marks[:, ::-1] + 0.5, colors=[COLLISION_RGB], radii=[0.5], draw_order=30)
+        )
 
     def _log_point(self, entity: str, cell, radius: float, rgb, label: str | None) -> None:
         if cell is None:
@@ -425,8 +507,7 @@ class Recorder:
             return
         self._cleared[entity] = False
         pos = [(cell[1] + 0.5, cell[0] + 0.5)]
-        self._rec.log(entity, rr.Points2D(pos, colors=[rgb], radii=[radius],
-                                          labels=[label] if label else None))
+        self._rec.log(entity, rr.Points2D(pos, colors=[rgb], radii=[radius], labels=[label] if label else None))
 
     def _log_frontiers(self, frontiers: list, chosen: int | None) -> None:
         if not frontiers:
@@ -439,14 +520,20 @@ class Recorder:
         colors = score_colors(scores)
         radii = [4.0 if f.id == chosen else 2.5 for f in frontiers]
         top = set(np.argsort(-scores, kind="stable")[:LABELLED_FRONTIERS].tolist())
-        labels = [_frontier_label(f, f.id == chosen) if i in top or f.id == chosen else ""
-                  for i, f in enumerate(frontiers)]
-        self._rec.log(MAP_FRONTIERS, rr.Points2D(centers, colors=colors, radii=radii, labels=labels,
-                                                 show_labels=True),
-                      rr.AnyValues(frontier_id=np.array([f.id for f in frontiers], np.int32),
-                                   score_llm=_scores(frontiers, "s_llm"), score_cu=_scores(frontiers, "s_cu"),
-                                   score_fused=_scores(frontiers, "fused"),
-                                   chosen=np.array([f.id == chosen for f in frontiers])))
+        labels = [
+            _frontier_label(f, f.id == chosen) if i in top or f.id == chosen else "" for i, f in enumerate(frontiers)
+        ]
+        self._rec.log(
+            MAP_FRONTIERS,
+            rr.Points2D(centers, colors=colors, radii=radii, labels=labels, show_labels=True),
+            rr.AnyValues(
+                frontier_id=np.array([f.id for f in frontiers], np.int32),
+                score_llm=_scores(frontiers, "s_llm"),
+                score_cu=_scores(frontiers, "s_cu"),
+                score_fused=_scores(frontiers, "fused"),
+                chosen=np.array([f.id == chosen for f in frontiers]),
+            ),
+        )
         cells = np.concatenate([f.cells for f in frontiers])[:, ::-1].astype(np.float32) + 0.5
         cell_colors = np.repeat(colors, [len(f.cells) for f in frontiers], axis=0)
         self._rec.log(MAP_FRONTIER_CELLS, rr.Points2D(cells, colors=cell_colors, radii=[0.5]))
@@ -481,9 +568,14 @@ class Recorder:
         self._rec.log(LOG_EPISODE, rr.TextLog(f"done: {summary}", level="INFO"))
         rows = "\n".join(f"| {k} | {_fmt(v)} |" for k, v in res.items() if not isinstance(v, (dict, list)))
         m = self.meta
-        self._rec.log(EPISODE, rr.TextDocument(
-            f"# {m['scene']} episode {m['episode_id']}\n\n* dataset: `{m['dataset']}`\n* policy: `{m['policy']}`\n"
-            f"* goal: **{ev.goal}**\n\n| result | value |\n|---|---|\n{rows}\n", media_type="text/markdown"))
+        self._rec.log(
+            EPISODE,
+            rr.TextDocument(
+                f"# {m['scene']} episode {m['episode_id']}\n\n* dataset: `{m['dataset']}`\n* policy: `{m['policy']}`\n"
+                f"* goal: **{ev.goal}**\n\n| result | value |\n|---|---|\n{rows}\n",
+                media_type="text/markdown",
+            ),
+        )
 
     def _clear(self, entity: str) -> None:
         if self._cleared.get(entity) is False:  # only once, and only after something was shown
@@ -507,8 +599,10 @@ def _start_file(rec: rr.RecordingStream, path: Path) -> None:
     starter.start()
     starter.join(SAVE_TIMEOUT_S)
     if starter.is_alive():
-        raise L3MVNError(f"cannot write recording {path}: rerun's writer did not start within {SAVE_TIMEOUT_S:g} s "
-                         "(a full disk or a file size limit?)")
+        raise L3MVNError(
+            f"cannot write recording {path}: rerun's writer did not start within {SAVE_TIMEOUT_S:g} s "
+            "(a full disk or a file size limit?)"
+        )
     if failed:
         raise L3MVNError(f"cannot write recording {path}: {first_line(failed[0])}")
 
@@ -523,8 +617,10 @@ def _check_room(path: Path) -> None:
         raise L3MVNError(f"cannot write recording {path}: {exc.strerror or exc}") from None
     free = disk.f_bavail * disk.f_frsize
     if free < MIN_FREE_BYTES:
-        raise L3MVNError(f"cannot write recording {path}: only {free >> 10} KiB free on its disk (a recording "
-                         f"needs a few MiB; {MIN_FREE_BYTES >> 20} MiB are asked for)")
+        raise L3MVNError(
+            f"cannot write recording {path}: only {free >> 10} KiB free on its disk (a recording "
+            f"needs a few MiB; {MIN_FREE_BYTES >> 20} MiB are asked for)"
+        )
 
 
 def hold_exclusively(path: Path) -> int:
@@ -541,8 +637,10 @@ def hold_exclusively(path: Path) -> int:
     except OSError as exc:
         os.close(fd)
         if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN):
-            raise L3MVNError(f"recording {path} is being written by another recorder; record into another "
-                             "folder or wait for it to finish") from None
+            raise L3MVNError(
+                f"recording {path} is being written by another recorder; record into another "
+                "folder or wait for it to finish"
+            ) from None
         raise L3MVNError(f"cannot lock recording {path} ({exc.strerror or exc}): record to a local disk") from None
     return fd
 
@@ -586,19 +684,23 @@ def _blob_boxes(mask: np.ndarray, merge: int) -> tuple[tuple[int, int, int, int]
     rows = np.flatnonzero(mask.any(axis=1))
     if rows.size == 0:
         return ()
-    cols = np.flatnonzero(mask[rows[0]:rows[-1] + 1].any(axis=0))
+    cols = np.flatnonzero(mask[rows[0] : rows[-1] + 1].any(axis=0))
     r0, c0 = int(rows[0]), int(cols[0])
-    window = mask[r0:rows[-1] + 1, c0:cols[-1] + 1]
+    window = mask[r0 : rows[-1] + 1, c0 : cols[-1] + 1]
     grown = ndi.binary_dilation(window, iterations=merge) if merge > 0 else window
     labels, _ = ndi.label(grown, structure=np.ones((3, 3), bool))
     labels[~window] = 0  # each box spans the group's own cells, not the dilation
-    return tuple((r0 + s[0].start, r0 + s[0].stop, c0 + s[1].start, c0 + s[1].stop)
-                 for s in ndi.find_objects(labels) if s is not None)
+    return tuple(
+        (r0 + s[0].start, r0 + s[0].stop, c0 + s[1].start, c0 + s[1].stop)
+        for s in ndi.find_objects(labels)
+        if s is not None
+    )
 
 
 def _scores(frontiers: list, field: str) -> np.ndarray:
-    return np.array([math.nan if getattr(f, field) is None else float(getattr(f, field)) for f in frontiers],
-                    np.float32)
+    return np.array(
+        [math.nan if getattr(f, field) is None else float(getattr(f, field)) for f in frontiers], np.float32
+    )
 
 
 def _scored(f) -> tuple[str, float]:

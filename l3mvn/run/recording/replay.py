@@ -31,13 +31,23 @@ _PR_SET_PDEATHSIG = 1  # linux/prctl.h
 def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``l3mvn replay FILE.rrd [--web] [--port N]``."""
     parser.add_argument("file", help="a .rrd recording (see recordings/)")
-    parser.add_argument("--web", action="store_true",
-                        help="serve rerun's web viewer over HTTP and print its URL instead of opening a window")
-    parser.add_argument("--port", type=int, default=DEFAULT_WEB_PORT,
-                        help=f"HTTP port of the web viewer with --web (default {DEFAULT_WEB_PORT}); its data "
-                             "port is picked free and printed too")
-    parser.add_argument("--host", default="127.0.0.1",
-                        help="interface the web viewer binds with --web (default 127.0.0.1, this machine only)")
+    parser.add_argument(
+        "--web",
+        action="store_true",
+        help="serve rerun's web viewer over HTTP and print its URL instead of opening a window",
+    )
+    parser.add_argument(
+        "--port",
+        type=int,
+        default=DEFAULT_WEB_PORT,
+        help=f"HTTP port of the web viewer with --web (default {DEFAULT_WEB_PORT}); its data "
+        "port is picked free and printed too",
+    )
+    parser.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="interface the web viewer binds with --web (default 127.0.0.1, this machine only)",
+    )
 
 
 def run_replay(args: argparse.Namespace) -> int:
@@ -106,10 +116,12 @@ def _web_command(exe: str, path: Path, host: str, port: int) -> list[str]:
     data_port = _free_port(host)
     if host not in ("127.0.0.1", "localhost", "::1"):
         print(f"warning: serving on {host}: anyone who can reach it can read the recording", file=sys.stderr)
-    print(f"serving {path} at {web_viewer_url(port, data_port, _url_host(host))} (HTTP port {port}, data port "
-          f"{data_port}; Ctrl-C to stop)", flush=True)
-    return [exe, "--serve-web", "--web-viewer-port", str(port), "--port", str(data_port), "--bind", host,
-            str(path)]
+    print(
+        f"serving {path} at {web_viewer_url(port, data_port, _url_host(host))} (HTTP port {port}, data port "
+        f"{data_port}; Ctrl-C to stop)",
+        flush=True,
+    )
+    return [exe, "--serve-web", "--web-viewer-port", str(port), "--port", str(data_port), "--bind", host, str(path)]
 
 
 def _native_command(exe: str, path: Path) -> list[str]:
@@ -139,8 +151,7 @@ def run_viewer(cmd: list[str]) -> int:
 def _child_options() -> dict:
     if os.name != "posix":
         return {}
-    return {"start_new_session": True,
-            "preexec_fn": _die_with_parent() if sys.platform.startswith("linux") else None}
+    return {"start_new_session": True, "preexec_fn": _die_with_parent() if sys.platform.startswith("linux") else None}
 
 
 def _die_with_parent() -> Callable[[], None]:

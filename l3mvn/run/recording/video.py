@@ -36,8 +36,9 @@ class VideoResult:
         return self.title_frames + self.steps
 
 
-def export_video(recording: str | Path, out: str | Path, options: VideoOptions = VideoOptions(), *,
-                 gif: bool = False) -> VideoResult:
+def export_video(
+    recording: str | Path, out: str | Path, options: VideoOptions = VideoOptions(), *, gif: bool = False
+) -> VideoResult:
     """Write ``out`` (.mp4, OpenCV's mp4v) from ``recording``, and with ``gif`` a GIF beside it (same
     stem; one title frame held ``title_s``, for READMEs). Raises a one-line L3MVNError on bad input.
 
@@ -55,8 +56,10 @@ def export_video(recording: str | Path, out: str | Path, options: VideoOptions =
         found = int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) if capture.isOpened() else 0
         capture.release()
         if found != expected:
-            raise L3MVNError(f"cannot write video {out}: {found} of its {expected} frames reached the disk (is it "
-                             "full?); nothing was written there")
+            raise L3MVNError(
+                f"cannot write video {out}: {found} of its {expected} frames reached the disk (is it "
+                "full?); nothing was written there"
+            )
 
     with replacing_path(out, "video", check=whole) as partial:
         writer = cv2.VideoWriter(str(partial), cv2.VideoWriter.fourcc(*"mp4v"), options.fps, (geo.width, geo.height))

@@ -10,12 +10,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from l3mvn.core.config import Config
-from l3mvn.world.episodes import generate_episodes, read_episodes
 from l3mvn.core.errors import L3MVNError
+from l3mvn.world.episode import Episode
+from l3mvn.world.episodes import generate_episodes, read_episodes
 from l3mvn.world.scenes.procedural import procedural_split
 from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.scenes.semexp import load_split
-from l3mvn.world.episode import Episode
 
 PROCEDURAL = "procedural"
 SEMEXP = "semexp"
@@ -66,8 +66,10 @@ def load_episode_set(
     if is_objectnav(dataset, split):
         return load_objectnav(dataset, scenes_dir, split, cfg)
     if scenes_dir is not None:
-        raise L3MVNError(f"--scenes is for habitat ObjectNav datasets (<split>/<split>.json.gz); {dataset} is "
-                         "in SemExp's format, whose maps need no scans")
+        raise L3MVNError(
+            f"--scenes is for habitat ObjectNav datasets (<split>/<split>.json.gz); {dataset} is "
+            "in SemExp's format, whose maps need no scans"
+        )
     scenes = load_split(dataset, split)
     return EpisodeSet(Path(dataset).resolve().name, split, scenes, read_episodes(dataset, split, scenes), SEMEXP)
 

@@ -29,17 +29,22 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage as ndi
 
+from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.config import Config, TaskConfig
-from l3mvn.world.datasets.objectnav_files import (EpisodeRecord, GoalRecord, content_dir, write_scene_file,
-                                                  write_split_file)
-from l3mvn.world.episodes import generate_episodes
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.grid import disk
 from l3mvn.core.paths import plain_name
 from l3mvn.core.writing import make_folder, write_file
+from l3mvn.world.datasets.objectnav_files import (
+    EpisodeRecord,
+    GoalRecord,
+    content_dir,
+    write_scene_file,
+    write_split_file,
+)
+from l3mvn.world.episodes import generate_episodes
 from l3mvn.world.scenes.procedural import procedural_split
 from l3mvn.world.scenes.scan import SemanticObject, write_semantic_txt
-from l3mvn.core.grid import disk
-from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.sim.world import build_world
 from l3mvn.world.task.regions import footprint_region, geodesic_field
@@ -61,8 +66,16 @@ class ExportSummary:
     episodes: int
 
 
-def export_hm3d(out: str | Path, houses: int, *, seed: int = 0, split: str = "val", floors: int = 1,
-                episodes_per_floor: int = 6, cfg: Config | None = None) -> ExportSummary:
+def export_hm3d(
+    out: str | Path,
+    houses: int,
+    *,
+    seed: int = 0,
+    split: str = "val",
+    floors: int = 1,
+    episodes_per_floor: int = 6,
+    cfg: Config | None = None,
+) -> ExportSummary:
     """Write ``houses`` procedural houses of ``floors`` storeys and their episodes under ``out``."""
     for name, value in (("--houses", houses), ("--floors", floors), ("--episodes-per-floor", episodes_per_floor)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -92,12 +105,17 @@ def export_hm3d(out: str | Path, houses: int, *, seed: int = 0, split: str = "va
 
 def _write_dataset_config(root: Path) -> None:
     config = {
-        "stages": {"default_attributes": {"up": [0, 1, 0], "front": [0, 0, -1], "origin": [0, 0, 0]},
-                   "paths": {".glb": ["*/*.glb"]}},
-        "objects": {}, "light_setups": {}, "scene_instances": {},
+        "stages": {
+            "default_attributes": {"up": [0, 1, 0], "front": [0, 0, -1], "origin": [0, 0, 0]},
+            "paths": {".glb": ["*/*.glb"]},
+        },
+        "objects": {},
+        "light_setups": {},
+        "scene_instances": {},
     }
-    write_file(root / "hm3d_annotated_basis.scene_dataset_config.json", json.dumps(config, indent=1),
-               "scene dataset config")
+    write_file(
+        root / "hm3d_annotated_basis.scene_dataset_config.json", json.dumps(config, indent=1), "scene dataset config"
+    )
 
 
 @dataclass
@@ -111,8 +129,9 @@ class _Goal:
 
 
 def _goal_record(goal: _Goal) -> GoalRecord:
-    return GoalRecord(goal.object_id, goal.category, tuple((float(x), float(y), float(z)) for x, y, z in goal.views),
-                      goal.position)
+    return GoalRecord(
+        goal.object_id, goal.category, tuple((float(x), float(y), float(z)) for x, y, z in goal.views), goal.position
+    )
 
 
 def _habitat(scene: SceneMap, x: np.ndarray, y: np.ndarray, level: float) -> np.ndarray:
@@ -129,8 +148,9 @@ def _write_scan(folder: Path, name: str, storeys: list[SceneMap], cfg: Config) -
     goals: list[_Goal] = []
     walkables: list[np.ndarray] = []
     parts_v, parts_rgb, parts_id = [], [], []
-    geodesic = Config(task=TaskConfig(success_rule="geodesic", success_distance_m=cfg.task.success_distance_m),
-                      sim=cfg.sim)
+    geodesic = Config(
+        task=TaskConfig(success_rule="geodesic", success_distance_m=cfg.task.success_distance_m), sim=cfg.sim
+    )
     for s, scene in enumerate(storeys):
         level = s * STOREY_M
         world = build_world(scene, cfg.sim, rooms_only=True)
@@ -169,8 +189,9 @@ def _write_scan(folder: Path, name: str, storeys: list[SceneMap], cfg: Config) -
     image, uv_of = _palette_texture(palette)
     uv = np.repeat(uv_of[which.ravel()], 3, axis=0)
     material = trimesh.visual.material.PBRMaterial(baseColorTexture=image, baseColorFactor=[255, 255, 255, 255])
-    stage = trimesh.Trimesh(vertices, faces, visual=trimesh.visual.TextureVisuals(uv=uv, material=material),
-                            process=False)
+    stage = trimesh.Trimesh(
+        vertices, faces, visual=trimesh.visual.TextureVisuals(uv=uv, material=material), process=False
+    )
     write_file(folder / f"{name}.glb", stage.export(file_type="glb"), "stage mesh")
     # As HM3D's: the object colours of .semantic.txt painted into the semantic mesh's texture, and
     # per vertex as linear COLOR_0 (habitat-sim requires vertex colours and reads them as linear,
@@ -207,8 +228,9 @@ def _with_vertex_colours(glb: bytes, rgb: np.ndarray) -> bytes:
     data = np.concatenate([linear, np.ones((len(rgb), 1))], axis=1).astype("<f4").tobytes()
     binary += b"\0" * (-len(binary) % 4)
     header["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": len(data)})
-    header["accessors"].append({"bufferView": len(header["bufferViews"]) - 1, "componentType": 5126,
-                                "count": len(rgb), "type": "VEC4"})
+    header["accessors"].append(
+        {"bufferView": len(header["bufferViews"]) - 1, "componentType": 5126, "count": len(rgb), "type": "VEC4"}
+    )
     (mesh,) = header["meshes"]
     (primitive,) = mesh["primitives"]
     primitive["attributes"]["COLOR_0"] = len(header["accessors"]) - 1
@@ -255,8 +277,17 @@ def _palette_texture(palette: np.ndarray):
     return Image.fromarray(texels), uv
 
 
-def _instance_goals(scene: SceneMap, walkable: np.ndarray, labels: np.ndarray, n: int, first: int, category: str,
-                    storey: int, level: float, geodesic: Config) -> list[_Goal]:
+def _instance_goals(
+    scene: SceneMap,
+    walkable: np.ndarray,
+    labels: np.ndarray,
+    n: int,
+    first: int,
+    category: str,
+    storey: int,
+    level: float,
+    geodesic: Config,
+) -> list[_Goal]:
     """Each instance's view points: walkable lattice cells within the success distance of it."""
     out = []
     lattice = np.zeros(scene.shape, bool)
@@ -276,8 +307,15 @@ def _instance_goals(scene: SceneMap, walkable: np.ndarray, labels: np.ndarray, n
     return out
 
 
-def _episodes(scene_id: str, storeys: list[SceneMap], walkables: list[np.ndarray], goals: list[_Goal],
-              per_floor: int, seed: int, cfg: Config) -> list[EpisodeRecord]:
+def _episodes(
+    scene_id: str,
+    storeys: list[SceneMap],
+    walkables: list[np.ndarray],
+    goals: list[_Goal],
+    per_floor: int,
+    seed: int,
+    cfg: Config,
+) -> list[EpisodeRecord]:
     """Episodes as habitat's files give them: starts from our generator where the exported geometry
     is navigable, the geodesic to the nearest view point over that geometry's traversible cells."""
     records: list[EpisodeRecord] = []
@@ -304,15 +342,23 @@ def _episodes(scene_id: str, storeys: list[SceneMap], walkables: list[np.ndarray
             position[1] = s * STOREY_M
             start = np.array(position)
             nearest = [float(np.linalg.norm(g.views - start, axis=1).min()) for g in by_category[ep.goal]]
-            records.append(EpisodeRecord(
-                ep.episode_id, scene_id, (position[0], position[1], position[2]), (w, x, y, z), ep.goal,
-                geodesic_m=round(distance, 4), euclidean_m=round(min(nearest), 4),
-                closest_object_id=int(by_category[ep.goal][int(np.argmin(nearest))].object_id),
-            ))
+            records.append(
+                EpisodeRecord(
+                    ep.episode_id,
+                    scene_id,
+                    (position[0], position[1], position[2]),
+                    (w, x, y, z),
+                    ep.goal,
+                    geodesic_m=round(distance, 4),
+                    euclidean_m=round(min(nearest), 4),
+                    closest_object_id=int(by_category[ep.goal][int(np.argmin(nearest))].object_id),
+                )
+            )
     return records
 
 
 # --- the command ---------------------------------------------------------------------------------
+
 
 def add_export_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--houses", type=int, default=1, help="procedural houses to export (default 1)")
@@ -324,9 +370,16 @@ def add_export_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run_export(args: argparse.Namespace) -> int:
-    summary = export_hm3d(args.out, args.houses, seed=args.seed, split=args.split, floors=args.floors,
-                          episodes_per_floor=args.episodes_per_floor)
-    print(f"wrote {summary.scenes} scans and {summary.episodes} episodes: l3mvn eval --dataset "
-          f"{summary.dataset_dir} --scenes {summary.scenes_dir} --split {args.split} --policy oracle")
+    summary = export_hm3d(
+        args.out,
+        args.houses,
+        seed=args.seed,
+        split=args.split,
+        floors=args.floors,
+        episodes_per_floor=args.episodes_per_floor,
+    )
+    print(
+        f"wrote {summary.scenes} scans and {summary.episodes} episodes: l3mvn eval --dataset "
+        f"{summary.dataset_dir} --scenes {summary.scenes_dir} --split {args.split} --policy oracle"
+    )
     return 0
-

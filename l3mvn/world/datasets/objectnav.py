@@ -18,18 +18,21 @@ from pathlib import Path
 import numpy as np
 
 from l3mvn.core.config import Config
-from l3mvn.world.datasets import EpisodeSet
-from l3mvn.world.datasets.objectnav_files import EpisodeRecord, read_scenes, read_split, scene_name, split_file
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.paths import relative_parts
+from l3mvn.core.types import Pose
+from l3mvn.world.datasets import EpisodeSet
+from l3mvn.world.datasets.objectnav_files import EpisodeRecord, read_scenes, read_split, scene_name, split_file
+from l3mvn.world.episode import Episode
 from l3mvn.world.scenes.scan import ScanFiles, ScanFloor, floor_at, load_scan, scene_up_axis
 from l3mvn.world.task.regions import GoalRegion, goal_region
-from l3mvn.core.types import Pose
-from l3mvn.world.episode import Episode
 
 # Format -> the success rule its papers report (the default when --rule is not given).
 FORMAT_RULES: dict[str, str] = {
-    "objectnav_hm3d_v1": "hm3d", "objectnav_hm3d_v2": "hm3d", "objectnav_mp3d": "mp3d", "objectnav_gibson": "semexp",
+    "objectnav_hm3d_v1": "hm3d",
+    "objectnav_hm3d_v2": "hm3d",
+    "objectnav_mp3d": "mp3d",
+    "objectnav_gibson": "semexp",
 }
 log = logging.getLogger(__name__)
 
@@ -58,8 +61,9 @@ def detect_format(scene_id: str) -> str:
         return "objectnav_mp3d"
     if any(p.startswith("gibson") for p in parts):
         return "objectnav_gibson"
-    raise L3MVNError(f"scene_id {scene_id!r} names no known scan dataset; valid: paths under hm3d, hm3d_v0.2, "
-                     "mp3d or gibson")
+    raise L3MVNError(
+        f"scene_id {scene_id!r} names no known scan dataset; valid: paths under hm3d, hm3d_v0.2, mp3d or gibson"
+    )
 
 
 def dataset_rule(dataset: str | Path | None, split: str) -> str:
@@ -70,8 +74,9 @@ def dataset_rule(dataset: str | Path | None, split: str) -> str:
     return FORMAT_RULES[detect_format(read_split(dataset, split).first_scene_id)]
 
 
-def load_objectnav(dataset: str | Path, scenes_dir: str | Path | None, split: str,
-                   cfg: Config | None = None) -> EpisodeSet:
+def load_objectnav(
+    dataset: str | Path, scenes_dir: str | Path | None, split: str, cfg: Config | None = None
+) -> EpisodeSet:
     """Every episode of a habitat ObjectNav split on its scans (``scenes_dir``), scene by scene in
     name order; scans load through ``scenes.scan`` with the goal instances and view points the file
     gives."""
@@ -113,8 +118,9 @@ def _scan_files(scene_id: str, root: Path) -> ScanFiles:
             tried.append(candidate)
             if candidate.is_file():
                 return _with_semantics(candidate, root)
-    raise L3MVNError(f"scan {scene_id} is not under --scenes {root} (looked for {tried[-1]} and "
-                     f"{len(tried) - 1} longer paths)")
+    raise L3MVNError(
+        f"scan {scene_id} is not under --scenes {root} (looked for {tried[-1]} and {len(tried) - 1} longer paths)"
+    )
 
 
 def _with_semantics(stage: Path, root: Path) -> ScanFiles:
@@ -135,9 +141,13 @@ def _with_semantics(stage: Path, root: Path) -> ScanFiles:
         raise L3MVNError(f"scan {stage}: {missing.name} is missing beside it (a semantic mesh needs its table)")
     has = semantic_glb.is_file()
     if not has:  # e.g. MP3D's .house or Gibson's 3DSceneGraph: formats this reader does not read yet
-        log.warning("scan %s has no HM3D semantic annotation (%s + %s): no goal object can be seen on our "
-                    "renderer, so its episodes cannot succeed; MP3D and Gibson semantics run with --sim habitat",
-                    stage, semantic_glb.name, semantic_txt.name)
+        log.warning(
+            "scan %s has no HM3D semantic annotation (%s + %s): no goal object can be seen on our "
+            "renderer, so its episodes cannot succeed; MP3D and Gibson semantics run with --sim habitat",
+            stage,
+            semantic_glb.name,
+            semantic_txt.name,
+        )
     return ScanFiles(stage, semantic_glb if has else None, semantic_txt if has else None, scene_up_axis(config))
 
 
@@ -145,8 +155,15 @@ def _place(where: str, rec: EpisodeRecord, floors: dict[int, ScanFloor]) -> Epis
     """The episode in our frame, on the floor below its start."""
     floor = floor_at(floors, rec.position[1])
     start = _on_navigable(where, floor, floor.pose_from_habitat(list(rec.position), list(rec.rotation_wxyz)))
-    return Episode(episode_id=rec.episode_id, scene=floor.name, floor=floor.floor, start=start, goal=rec.goal,
-                   object_id=-1, geodesic_distance_m=rec.geodesic_m)
+    return Episode(
+        episode_id=rec.episode_id,
+        scene=floor.name,
+        floor=floor.floor,
+        start=start,
+        goal=rec.goal,
+        object_id=-1,
+        geodesic_distance_m=rec.geodesic_m,
+    )
 
 
 def _on_navigable(where: str, floor: ScanFloor, pose: Pose) -> Pose:
@@ -160,8 +177,10 @@ def _on_navigable(where: str, floor: ScanFloor, pose: Pose) -> Pose:
     d = np.hypot(cells[:, 0] - r, cells[:, 1] - c) * floor.resolution_m
     k = int(np.argmin(d))
     if d[k] > START_SNAP_M:
-        raise L3MVNError(f"{where}: start cell ({r}, {c}) of {floor.key} is {d[k]:.2f} m from our navigable floor "
-                         f"(more than {START_SNAP_M} m)")
+        raise L3MVNError(
+            f"{where}: start cell ({r}, {c}) of {floor.key} is {d[k]:.2f} m from our navigable floor "
+            f"(more than {START_SNAP_M} m)"
+        )
     x, y = floor.cell_center(int(cells[k, 0]), int(cells[k, 1]))
     return Pose(x, y, pose.heading)
 
@@ -190,6 +209,10 @@ def geodesic_report(eset: EpisodeSet, cfg: Config) -> str:
     unreachable = int(np.isinf(error).sum())
     finite = error[np.isfinite(error)]
     worst = pairs[int(np.argmax(np.where(np.isfinite(error), error, -1.0)))][0] if finite.size else "-"
-    text = (f"geodesic check: ours vs the file's on {len(pairs)} episodes: median {100 * np.median(finite):.1f}%, "
-            f"max {100 * finite.max():.1f}% ({worst})" if finite.size else f"geodesic check: {len(pairs)} episodes")
+    text = (
+        f"geodesic check: ours vs the file's on {len(pairs)} episodes: median {100 * np.median(finite):.1f}%, "
+        f"max {100 * finite.max():.1f}% ({worst})"
+        if finite.size
+        else f"geodesic check: {len(pairs)} episodes"
+    )
     return text + (f", {unreachable} without a path on our grid" if unreachable else "")

@@ -27,8 +27,14 @@ from l3mvn.world.scenes.categories import goal_category
 
 # Our goal category -> HM3D's episode name (the inverse of categories.GOAL_NAMES for HM3D's six); the
 # written category tables number the names in this order.
-HM3D_GOAL_NAMES: dict[str, str] = {"chair": "chair", "couch": "sofa", "potted plant": "plant", "bed": "bed",
-                                   "toilet": "toilet", "tv": "tv_monitor"}
+HM3D_GOAL_NAMES: dict[str, str] = {
+    "chair": "chair",
+    "couch": "sofa",
+    "potted plant": "plant",
+    "bed": "bed",
+    "toilet": "toilet",
+    "tv": "tv_monitor",
+}
 _ID_LIMIT = 2**63  # ids key results and resume files: keep them 64-bit integers
 _AXES = "[x, y up, z]"
 
@@ -128,8 +134,9 @@ def read_scenes(split: SplitFiles) -> dict[str, SceneRecords]:
     for file in split.files:
         for index, rec in enumerate(file.episodes):
             if not isinstance(rec, dict) or not isinstance(rec.get("scene_id"), str):
-                raise L3MVNError(f"{file.path}: episode #{index} must be an object with a scene_id string, "
-                                 f"got {_show(rec)}")
+                raise L3MVNError(
+                    f"{file.path}: episode #{index} must be an object with a scene_id string, got {_show(rec)}"
+                )
             entries.setdefault(rec["scene_id"], []).append((file.path, index, rec))
         for key, value in file.goals.items():
             goals.setdefault(str(key), []).append((file.path, value))
@@ -137,16 +144,22 @@ def read_scenes(split: SplitFiles) -> dict[str, SceneRecords]:
     return {scene_id: SceneRecords(records, _goals(scene_id, goals)) for scene_id, records in episodes.items()}
 
 
-def write_scene_file(dataset: str | Path, split: str, scene_id: str, episodes: Sequence[EpisodeRecord],
-                     goals: Sequence[GoalRecord]) -> Path:
+def write_scene_file(
+    dataset: str | Path, split: str, scene_id: str, episodes: Sequence[EpisodeRecord], goals: Sequence[GoalRecord]
+) -> Path:
     """``content/<scene>.json.gz``: a scene's episodes and goal instances under HM3D's names, with
     the category tables, written whole."""
     by_key: dict[str, list[dict]] = {}
     for goal in goals:
         by_key.setdefault(_goals_key(scene_id, HM3D_GOAL_NAMES[goal.goal]), []).append(_goal_json(goal))
-    return _write(content_dir(dataset, split) / f"{scene_name(scene_id)}.json.gz", {
-        "episodes": [_episode_json(ep) for ep in episodes], "goals_by_category": by_key, **_category_tables(),
-    })
+    return _write(
+        content_dir(dataset, split) / f"{scene_name(scene_id)}.json.gz",
+        {
+            "episodes": [_episode_json(ep) for ep in episodes],
+            "goals_by_category": by_key,
+            **_category_tables(),
+        },
+    )
 
 
 def write_split_file(dataset: str | Path, split: str) -> Path:
@@ -156,10 +169,11 @@ def write_split_file(dataset: str | Path, split: str) -> Path:
 
 # --- reading ------------------------------------------------------------------------------------
 
+
 def _read_file(path: Path) -> EpisodeFile:
     data = read_json_gz(path)
     if not isinstance(data, dict) or not isinstance(data.get("episodes", []), list):
-        raise L3MVNError(f"{path}: expected an object with an \"episodes\" list")
+        raise L3MVNError(f'{path}: expected an object with an "episodes" list')
     goals = data.get("goals_by_category", {})
     if not isinstance(goals, dict):
         raise L3MVNError(f"{path}: goals_by_category must be an object, got {_show(goals)}")
@@ -180,15 +194,23 @@ def _episodes(scene_id: str, entries: list[tuple[Path, int, dict]]) -> tuple[tup
             raw_id = int(raw_id)
         episode_id = _whole_number(where, "episode_id", raw_id, 0, _ID_LIMIT)
         if episode_id in seen:
-            raise L3MVNError(f"{where}: episode_id {episode_id} repeats {seen[episode_id]} of scene "
-                             f"{scene_name(scene_id)}; ids must be unique within a scene")
+            raise L3MVNError(
+                f"{where}: episode_id {episode_id} repeats {seen[episode_id]} of scene "
+                f"{scene_name(scene_id)}; ids must be unique within a scene"
+            )
         seen[episode_id] = where
         where = f"{where} (id {episode_id})"
         x, y, z = _finite_numbers(where, "start_position", rec["start_position"], 3, _AXES)
         w, qx, qy, qz = yaw_quaternion(where, rec["start_rotation"], order="xyzw")
         goal = goal_category(rec["object_category"], where)
-        out.append((where, EpisodeRecord(episode_id, scene_id, (x, y, z), (w, qx, qy, qz), goal,
-                                         _geodesic(where, rec.get("info")))))
+        out.append(
+            (
+                where,
+                EpisodeRecord(
+                    episode_id, scene_id, (x, y, z), (w, qx, qy, qz), goal, _geodesic(where, rec.get("info"))
+                ),
+            )
+        )
     return tuple(out)
 
 
@@ -232,32 +254,48 @@ def _view(where: str, view: object) -> Vec3:
 
 # --- writing ------------------------------------------------------------------------------------
 
+
 def _episode_json(ep: EpisodeRecord) -> dict:
     w, x, y, z = ep.rotation_wxyz
     return {
-        "episode_id": str(ep.episode_id), "scene_id": ep.scene_id, "start_position": list(ep.position),
-        "start_rotation": [x, y, z, w], "info": {
-            "geodesic_distance": ep.geodesic_m, "euclidean_distance": ep.euclidean_m,
+        "episode_id": str(ep.episode_id),
+        "scene_id": ep.scene_id,
+        "start_position": list(ep.position),
+        "start_rotation": [x, y, z, w],
+        "info": {
+            "geodesic_distance": ep.geodesic_m,
+            "euclidean_distance": ep.euclidean_m,
             "closest_goal_object_id": ep.closest_object_id,
         },
-        "goals": [], "start_room": None, "shortest_paths": None, "object_category": HM3D_GOAL_NAMES[ep.goal],
+        "goals": [],
+        "start_room": None,
+        "shortest_paths": None,
+        "object_category": HM3D_GOAL_NAMES[ep.goal],
     }
 
 
 def _goal_json(goal: GoalRecord) -> dict:
     return {
-        "position": None if goal.centre is None else list(goal.centre), "radius": None,
-        "object_id": goal.object_id, "object_name": f"{goal.goal}_{goal.object_id}", "object_name_id": None,
-        "object_category": HM3D_GOAL_NAMES[goal.goal], "room_id": None, "room_name": None,
-        "view_points": [{"agent_state": {"position": list(p), "rotation": [0.0, 0.0, 0.0, 1.0]}, "iou": 1.0}
-                        for p in goal.views],
+        "position": None if goal.centre is None else list(goal.centre),
+        "radius": None,
+        "object_id": goal.object_id,
+        "object_name": f"{goal.goal}_{goal.object_id}",
+        "object_name_id": None,
+        "object_category": HM3D_GOAL_NAMES[goal.goal],
+        "room_id": None,
+        "room_name": None,
+        "view_points": [
+            {"agent_state": {"position": list(p), "rotation": [0.0, 0.0, 0.0, 1.0]}, "iou": 1.0} for p in goal.views
+        ],
     }
 
 
 def _category_tables() -> dict[str, dict[str, int]]:
     names = list(HM3D_GOAL_NAMES.values())
-    return {"category_to_task_category_id": {n: i for i, n in enumerate(names)},
-            "category_to_mp3d_category_id": {n: i + 1 for i, n in enumerate(names)}}
+    return {
+        "category_to_task_category_id": {n: i for i, n in enumerate(names)},
+        "category_to_mp3d_category_id": {n: i + 1 for i, n in enumerate(names)},
+    }
 
 
 def _write(path: Path, data: dict) -> Path:

@@ -81,8 +81,11 @@ class _Array:
 
 def _array(data: object, dtype: np.dtype, shape: object, order: _Order) -> np.ndarray:
     """A fresh array of ``shape`` from exactly the bytes it needs."""
-    if not isinstance(shape, tuple) or not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0
-                                               for n in shape) or len(shape) > 8:
+    if (
+        not isinstance(shape, tuple)
+        or not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in shape)
+        or len(shape) > 8
+    ):
         raise UnsafeMap(f"an array shape {shape!r}")
     count = math.prod(shape)
     if count > MAX_ELEMENTS:
@@ -136,8 +139,9 @@ class _MapUnpickler(pickle.Unpickler):
         try:
             return _GLOBALS[(module, name)]
         except KeyError:
-            raise UnsafeMap(f"refuses {module}.{name}: a SemExp map holds only dicts, numbers and numpy "
-                            "arrays") from None
+            raise UnsafeMap(
+                f"refuses {module}.{name}: a SemExp map holds only dicts, numbers and numpy arrays"
+            ) from None
 
 
 def load_map_pickle(fh: MapFile) -> Any:

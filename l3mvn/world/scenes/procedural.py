@@ -18,11 +18,11 @@ import cv2
 import numpy as np
 from scipy import ndimage as ndi
 
+from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
 from l3mvn.core.config import SimConfig
 from l3mvn.core.errors import L3MVNError
-from l3mvn.world.scenes.room_contents import RoomStats, load_room_contents, room_categories
 from l3mvn.core.grid import disk
-from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
+from l3mvn.world.scenes.room_contents import RoomStats, load_room_contents, room_categories
 from l3mvn.world.scenes.scene import SceneMap
 
 # Gibson's 15 first, in SemExp channel order (so channels 1..15 export as they are), then the rest
@@ -56,13 +56,38 @@ _PUBLICNESS = {"living room": 3, "kitchen": 2, "bedroom": 1, "bathroom": 0}
 # around: at a dining table or desk; front: in front of the couch; beside: next to a bed or couch;
 # opposite: on the wall facing the couch; on: on a surface (or against a wall when the data says so).
 _MODE: dict[str, str] = {
-    "bed": "wall", "toilet": "wall", "couch": "wall", "counter": "wall", "refrigerator": "corner",
-    "oven": "in", "sink": "in", "bathtub": "wall", "shower": "in", "dining-table": "middle",
-    "desk": "wall", "dresser": "wall", "tv stand": "opposite", "shelving unit": "wall",
-    "coffee table": "front", "side table": "beside", "chair": "around", "laundry hamper": "corner",
-    "garbage can": "corner", "potted plant": "on", "lamp": "on", "tv": "on", "towel": "on",
-    "microwave": "on", "toaster": "on", "coffee machine": "on", "laptop": "on", "book": "on",
-    "clock": "on", "vase": "on", "cup": "on", "bottle": "on",
+    "bed": "wall",
+    "toilet": "wall",
+    "couch": "wall",
+    "counter": "wall",
+    "refrigerator": "corner",
+    "oven": "in",
+    "sink": "in",
+    "bathtub": "wall",
+    "shower": "in",
+    "dining-table": "middle",
+    "desk": "wall",
+    "dresser": "wall",
+    "tv stand": "opposite",
+    "shelving unit": "wall",
+    "coffee table": "front",
+    "side table": "beside",
+    "chair": "around",
+    "laundry hamper": "corner",
+    "garbage can": "corner",
+    "potted plant": "on",
+    "lamp": "on",
+    "tv": "on",
+    "towel": "on",
+    "microwave": "on",
+    "toaster": "on",
+    "coffee machine": "on",
+    "laptop": "on",
+    "book": "on",
+    "clock": "on",
+    "vase": "on",
+    "cup": "on",
+    "bottle": "on",
 }
 # A sink or stove sits in a counter run; most AI2-THOR shower heads hang over a bathtub.
 _HOST = {"sink": "counter", "oven": "counter", "shower": "bathtub"}
@@ -71,30 +96,78 @@ _ORDER = tuple(_MODE)
 # Long side across the wall rather than along it (a bed's head, a toilet's back against the wall).
 _PERPENDICULAR = frozenset({"bed", "toilet"})
 # Surfaces small items stand on.
-_SURFACES = frozenset({
-    "counter", "dining-table", "coffee table", "side table", "desk", "dresser", "tv stand", "shelving unit",
-})
+_SURFACES = frozenset(
+    {
+        "counter",
+        "dining-table",
+        "coffee table",
+        "side table",
+        "desk",
+        "dresser",
+        "tv stand",
+        "shelving unit",
+    }
+)
 # A tv stand is there for the tv.
 _PREFERRED_SURFACE = {"tv": "tv stand"}
 # Items that never stand alone on the floor in a house (the data's few floor cases are built-ins).
-_SURFACE_ONLY = frozenset({
-    "microwave", "toaster", "coffee machine", "laptop", "book", "clock", "cup", "bottle", "vase",
-})
+_SURFACE_ONLY = frozenset(
+    {
+        "microwave",
+        "toaster",
+        "coffee machine",
+        "laptop",
+        "book",
+        "clock",
+        "cup",
+        "bottle",
+        "vase",
+    }
+)
 # AI2-THOR boxes include surrounds (tub decks, L-shaped counter blocks): clip to single units.
 _MAX_FOOTPRINT: dict[str, tuple[float, float]] = {
-    "counter": (3.0, 0.65), "bathtub": (1.8, 0.85), "shower": (1.2, 1.2), "oven": (0.8, 0.65),
-    "sink": (0.9, 0.6), "dining-table": (2.0, 1.1), "desk": (1.6, 0.8), "dresser": (1.6, 0.6),
-    "shelving unit": (1.6, 0.5), "tv stand": (1.8, 0.55), "side table": (0.7, 0.6), "couch": (2.6, 1.0),
-    "coffee table": (1.3, 0.8), "tv": (1.4, 0.25), "towel": (0.6, 0.1), "toilet": (0.95, 0.6), "chair": (1.0, 0.9),
+    "counter": (3.0, 0.65),
+    "bathtub": (1.8, 0.85),
+    "shower": (1.2, 1.2),
+    "oven": (0.8, 0.65),
+    "sink": (0.9, 0.6),
+    "dining-table": (2.0, 1.1),
+    "desk": (1.6, 0.8),
+    "dresser": (1.6, 0.6),
+    "shelving unit": (1.6, 0.5),
+    "tv stand": (1.8, 0.55),
+    "side table": (0.7, 0.6),
+    "couch": (2.6, 1.0),
+    "coffee table": (1.3, 0.8),
+    "tv": (1.4, 0.25),
+    "towel": (0.6, 0.1),
+    "toilet": (0.95, 0.6),
+    "chair": (1.0, 0.9),
 }
 _MIN_FOOTPRINT: dict[str, tuple[float, float]] = {
-    "counter": (1.2, 0.55), "shower": (0.9, 0.9), "bathtub": (1.5, 0.7),
+    "counter": (1.2, 0.55),
+    "shower": (0.9, 0.9),
+    "bathtub": (1.5, 0.7),
 }
 # Instances per room at most (3 for the rest): one dining set, one tv, up to six chairs.
 _MAX_COUNT = {
-    "chair": 6, "counter": 2, "side table": 2, "couch": 2, "bed": 2, "sink": 2, "dining-table": 1, "tv": 1,
-    "refrigerator": 1, "oven": 1, "toilet": 1, "bathtub": 1, "shower": 1, "coffee table": 1, "tv stand": 1,
-    "desk": 1, "dresser": 1,
+    "chair": 6,
+    "counter": 2,
+    "side table": 2,
+    "couch": 2,
+    "bed": 2,
+    "sink": 2,
+    "dining-table": 1,
+    "tv": 1,
+    "refrigerator": 1,
+    "oven": 1,
+    "toilet": 1,
+    "bathtub": 1,
+    "shower": 1,
+    "coffee table": 1,
+    "tv stand": 1,
+    "desk": 1,
+    "dresser": 1,
 }
 
 
@@ -119,10 +192,10 @@ class Rect:
     def width(self) -> int:
         return self.c1 - self.c0
 
-    def grown(self, n: int) -> "Rect":
+    def grown(self, n: int) -> Rect:
         return Rect(self.r0 - n, self.c0 - n, self.r1 + n, self.c1 + n)
 
-    def contains(self, other: "Rect") -> bool:
+    def contains(self, other: Rect) -> bool:
         return self.r0 <= other.r0 and self.c0 <= other.c0 and other.r1 <= self.r1 and other.c1 <= self.c1
 
 
@@ -277,8 +350,10 @@ def _interior(r: Rect, H: int, W: int) -> Rect:
     lo = _INTERIOR_WALL // 2
     hi = _INTERIOR_WALL - lo
     return Rect(
-        _EXTERIOR_WALL if r.r0 == 0 else r.r0 + hi, _EXTERIOR_WALL if r.c0 == 0 else r.c0 + hi,
-        H - _EXTERIOR_WALL if r.r1 == H else r.r1 - lo, W - _EXTERIOR_WALL if r.c1 == W else r.c1 - lo,
+        _EXTERIOR_WALL if r.r0 == 0 else r.r0 + hi,
+        _EXTERIOR_WALL if r.c0 == 0 else r.c0 + hi,
+        H - _EXTERIOR_WALL if r.r1 == H else r.r1 - lo,
+        W - _EXTERIOR_WALL if r.c1 == W else r.c1 - lo,
     )
 
 
@@ -298,8 +373,7 @@ def _room_kinds(rng: np.random.Generator, leaves: list[Rect]) -> list[str] | Non
     area = [r.height * r.width for r in leaves]
     living = int(np.argmax(area))
     neighbours = [
-        i for i in range(len(leaves))
-        if i != living and _usable_door_span(leaves[living], leaves[i], _OPENING_WIDTH[0])
+        i for i in range(len(leaves)) if i != living and _usable_door_span(leaves[living], leaves[i], _OPENING_WIDTH[0])
     ]
     if not neighbours:
         return None
@@ -432,8 +506,10 @@ class _Furnisher:
                 continue
             best = max(
                 range(len(self.states)),
-                key=lambda i: (self.stats[self.states[i].room.kind].frequency(goal),
-                               self.states[i].room.interior.height * self.states[i].room.interior.width),
+                key=lambda i: (
+                    self.stats[self.states[i].room.kind].frequency(goal),
+                    self.states[i].room.interior.height * self.states[i].room.interior.width,
+                ),
             )
             wishes[best].append(goal)
             wishes[best].sort(key=_ORDER.index)
@@ -542,8 +618,14 @@ class _Furnisher:
         slots = []
         if table.category == "desk" and table.side is not None:
             mid_r, mid_c = (t.r0 + t.r1 - s) // 2, (t.c0 + t.c1 - s) // 2
-            slots.append({0: (t.r1 + gap, mid_c), 1: (t.r0 - gap - s, mid_c),
-                          2: (mid_r, t.c1 + gap), 3: (mid_r, t.c0 - gap - s)}[table.side])
+            slots.append(
+                {
+                    0: (t.r1 + gap, mid_c),
+                    1: (t.r0 - gap - s, mid_c),
+                    2: (mid_r, t.c1 + gap),
+                    3: (mid_r, t.c0 - gap - s),
+                }[table.side]
+            )
         else:
             for k in range(max(1, t.width // (s + 4))):
                 c = t.c0 + (2 * k + 1) * t.width // (2 * max(1, t.width // (s + 4))) - s // 2
@@ -699,7 +781,11 @@ def _finish(seed: int, layout: _Layout, placed: list[_Placed]) -> ProceduralHous
         objects[PROCEDURAL_CATEGORIES.index(p.category)][p.rect.slices] = True
     navigable = _erode(layout.floor & ~objects.any(axis=0))
     scene = SceneMap(
-        name=f"procedural-{seed:04d}", floor=0, categories=PROCEDURAL_CATEGORIES,
-        navigable=navigable, objects=objects, resolution_m=_RES,
+        name=f"procedural-{seed:04d}",
+        floor=0,
+        categories=PROCEDURAL_CATEGORIES,
+        navigable=navigable,
+        objects=objects,
+        resolution_m=_RES,
     )
     return ProceduralHouse(scene, tuple(layout.rooms), tuple(layout.doors), layout.floor)

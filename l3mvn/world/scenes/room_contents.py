@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from l3mvn.core.errors import L3MVNError
-from l3mvn.core.writing import write_file
 from l3mvn.core.paths import PACKAGE_DATA
+from l3mvn.core.writing import write_file
 
 ROOM_CONTENTS_PATH = PACKAGE_DATA / "room_contents.json"
 SOURCE_PACKAGE = "procthor==0.0.1.dev2"
@@ -27,23 +27,58 @@ _METADATA_FILE = "databases/ai2thor-object-metadata.json"
 
 # The wheel's keys for the iTHOR rooms -> our room types (its "robothor" apartments mix room types).
 ROOM_TYPES: dict[str, str] = {
-    "bathrooms": "bathroom", "bedrooms": "bedroom", "kitchens": "kitchen", "living_rooms": "living room",
+    "bathrooms": "bathroom",
+    "bedrooms": "bedroom",
+    "kitchens": "kitchen",
+    "living_rooms": "living room",
 }
 
 # AI2-THOR objectType -> our category. Only objects with a footprint on the floor plan or standing
 # on furniture; wall decor, structure and clutter (Painting, Window, Cabinet, Pillow, ...) are left out.
 AI2THOR_TO_CATEGORY: dict[str, str] = {
-    "Chair": "chair", "ArmChair": "chair", "Sofa": "couch", "HousePlant": "potted plant", "Bed": "bed",
-    "Toilet": "toilet", "Television": "tv", "DiningTable": "dining-table", "StoveBurner": "oven",
-    "Sink": "sink", "SinkBasin": "sink", "Fridge": "refrigerator", "Book": "book", "AlarmClock": "clock",
-    "Vase": "vase", "Cup": "cup", "Mug": "cup", "Bottle": "bottle", "WineBottle": "bottle",
-    "SoapBottle": "bottle", "Bathtub": "bathtub", "BathtubBasin": "bathtub", "ShowerHead": "shower",
-    "ShowerDoor": "shower", "ShowerGlass": "shower", "ShowerCurtain": "shower", "Towel": "towel",
-    "HandTowel": "towel", "Dresser": "dresser", "SideTable": "side table", "Desk": "desk",
-    "CoffeeTable": "coffee table", "TVStand": "tv stand", "ShelvingUnit": "shelving unit",
-    "CounterTop": "counter", "FloorLamp": "lamp", "DeskLamp": "lamp",
-    "Microwave": "microwave", "Toaster": "toaster", "CoffeeMachine": "coffee machine",
-    "GarbageCan": "garbage can", "Laptop": "laptop", "LaundryHamper": "laundry hamper",
+    "Chair": "chair",
+    "ArmChair": "chair",
+    "Sofa": "couch",
+    "HousePlant": "potted plant",
+    "Bed": "bed",
+    "Toilet": "toilet",
+    "Television": "tv",
+    "DiningTable": "dining-table",
+    "StoveBurner": "oven",
+    "Sink": "sink",
+    "SinkBasin": "sink",
+    "Fridge": "refrigerator",
+    "Book": "book",
+    "AlarmClock": "clock",
+    "Vase": "vase",
+    "Cup": "cup",
+    "Mug": "cup",
+    "Bottle": "bottle",
+    "WineBottle": "bottle",
+    "SoapBottle": "bottle",
+    "Bathtub": "bathtub",
+    "BathtubBasin": "bathtub",
+    "ShowerHead": "shower",
+    "ShowerDoor": "shower",
+    "ShowerGlass": "shower",
+    "ShowerCurtain": "shower",
+    "Towel": "towel",
+    "HandTowel": "towel",
+    "Dresser": "dresser",
+    "SideTable": "side table",
+    "Desk": "desk",
+    "CoffeeTable": "coffee table",
+    "TVStand": "tv stand",
+    "ShelvingUnit": "shelving unit",
+    "CounterTop": "counter",
+    "FloorLamp": "lamp",
+    "DeskLamp": "lamp",
+    "Microwave": "microwave",
+    "Toaster": "toaster",
+    "CoffeeMachine": "coffee machine",
+    "GarbageCan": "garbage can",
+    "Laptop": "laptop",
+    "LaundryHamper": "laundry hamper",
 }
 
 # Parts of one physical object listed as separate AI2-THOR objects: they never add to a count.
@@ -51,7 +86,8 @@ _PARTS = frozenset({"SinkBasin", "BathtubBasin", "ShowerDoor", "ShowerGlass", "S
 # Several AI2-THOR objects form one of ours (four burners are one stove): at most one per room,
 # its footprint the union of these types' boxes.
 _ONE_PER_ROOM: dict[str, tuple[str, ...]] = {
-    "oven": ("StoveBurner",), "shower": ("ShowerGlass", "ShowerDoor", "ShowerCurtain"),
+    "oven": ("StoveBurner",),
+    "shower": ("ShowerGlass", "ShowerDoor", "ShowerCurtain"),
 }
 FLOOR = "floor"
 # Resting on something we do not model (a wall shelf, a towel holder, a wall cabinet).
@@ -89,8 +125,7 @@ def category_of(ai2thor_type: str) -> str:
         return AI2THOR_TO_CATEGORY[ai2thor_type]
     except KeyError:
         raise L3MVNError(
-            f"AI2-THOR type {ai2thor_type!r} has no category; "
-            f"mapped types: {', '.join(sorted(AI2THOR_TO_CATEGORY))}"
+            f"AI2-THOR type {ai2thor_type!r} has no category; mapped types: {', '.join(sorted(AI2THOR_TO_CATEGORY))}"
         ) from None
 
 
@@ -107,10 +142,12 @@ def load_room_contents(path: str | Path = ROOM_CONTENTS_PATH) -> dict[str, RoomS
         rooms = raw["rooms"]
         return {
             room: RoomStats(
-                room_type=room, n_rooms=int(rec["n_rooms"]),
+                room_type=room,
+                n_rooms=int(rec["n_rooms"]),
                 objects={
                     cat: ObjectStats(
-                        frequency=float(o["frequency"]), mean_count=float(o["mean_count"]),
+                        frequency=float(o["frequency"]),
+                        mean_count=float(o["mean_count"]),
                         on={k: float(v) for k, v in o["on"].items()},
                         sizes=tuple((float(a), float(b), float(c)) for a, b, c in o["sizes"]),
                     )

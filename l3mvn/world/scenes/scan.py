@@ -33,9 +33,9 @@ from scipy import ndimage as ndi
 
 from l3mvn.core.config import SimConfig
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.writing import write_file
 from l3mvn.world.scenes.categories import SCAN_CATEGORIES, raw_category
 from l3mvn.world.scenes.scene import SceneMap
-from l3mvn.core.writing import write_file
 
 GRID_M = 0.05  # ground-truth cell, as SemExp's maps
 RAY_TOP_MARGIN_M = 1.0  # rays start this far above the highest vertex
@@ -108,7 +108,7 @@ def read_semantic_txt(path: str | Path) -> dict[int, SemanticObject]:
             continue  # "HM3D Semantic Annotations"
         m = _SEMANTIC_LINE.match(line)
         if m is None:
-            raise L3MVNError(f"{path}:{number}: expected id,HEXCOLOR,\"name\",region, got {line[:80]!r}")
+            raise L3MVNError(f'{path}:{number}: expected id,HEXCOLOR,"name",region, got {line[:80]!r}')
         oid = int(m.group(1))
         if oid in objects:
             raise L3MVNError(f"{path}:{number}: object id {oid} appears twice")
@@ -141,6 +141,7 @@ def scene_up_axis(config: Path | None) -> tuple[float, float, float]:
 
 
 # --- mesh reading -----------------------------------------------------------------------------
+
 
 @dataclass
 class _Mesh:
@@ -230,6 +231,7 @@ def _texel(texels: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 # --- per-triangle categories ------------------------------------------------------------------
 
+
 def triangle_instances(stage: _Mesh, semantic: _Mesh, objects: dict[int, SemanticObject]) -> np.ndarray:
     """The semantic object id of every stage triangle (0: none): the nearest semantic triangle's
     (by centroid and facing) colour looked up in the annotation table (exact 8-bit match; the two
@@ -239,8 +241,11 @@ def triangle_instances(stage: _Mesh, semantic: _Mesh, objects: dict[int, Semanti
     from scipy.spatial import cKDTree
 
     by_rgb = {o.rgb: o.object_id for o in objects.values()}
-    packed = (semantic.face_rgb[:, 0].astype(np.int64) << 16) | (semantic.face_rgb[:, 1].astype(np.int64) << 8) \
+    packed = (
+        (semantic.face_rgb[:, 0].astype(np.int64) << 16)
+        | (semantic.face_rgb[:, 1].astype(np.int64) << 8)
         | semantic.face_rgb[:, 2].astype(np.int64)
+    )
     keys, inverse = np.unique(packed, return_inverse=True)
     sem_ids = np.array([by_rgb.get(int(k), 0) for k in keys], np.int64)[inverse]
     _, nearest = cKDTree(_face_keys(semantic)).query(_face_keys(stage), workers=1)
@@ -265,6 +270,7 @@ def instance_categories(objects: dict[int, SemanticObject], goal_instances: dict
 
 # --- floors and grids -------------------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class _Grid:
     """The top-down grid of a scene in habitat's frame: rows along x, columns along z."""
@@ -285,8 +291,9 @@ def _grid_of(vertices: np.ndarray) -> _Grid:
     border, where which side it marks would depend on rounding."""
     lo = (np.floor((vertices.min(axis=0) - GRID_MARGIN_M) / GRID_M) - 0.5) * GRID_M
     hi = vertices.max(axis=0) + GRID_MARGIN_M
-    return _Grid(float(lo[0]), float(lo[2]), int(math.ceil((hi[0] - lo[0]) / GRID_M)),
-                 int(math.ceil((hi[2] - lo[2]) / GRID_M)))
+    return _Grid(
+        float(lo[0]), float(lo[2]), int(math.ceil((hi[0] - lo[0]) / GRID_M)), int(math.ceil((hi[2] - lo[2]) / GRID_M))
+    )
 
 
 @dataclass(frozen=True)
@@ -353,23 +360,32 @@ class _Projection:
     centre: np.ndarray
 
     @classmethod
-    def of(cls, mesh: _Mesh, grid: _Grid) -> "_Projection":
+    def of(cls, mesh: _Mesh, grid: _Grid) -> _Projection:
         xy = np.stack([(mesh.vertices[:, 0] - grid.x0) / GRID_M, (mesh.vertices[:, 2] - grid.z0) / GRID_M], axis=1)
         y = mesh.vertices[:, 1][mesh.faces]
-        return cls(np.ascontiguousarray(xy), np.ascontiguousarray(mesh.faces), y.min(axis=1), y.max(axis=1),
-                   y.mean(axis=1))
+        return cls(
+            np.ascontiguousarray(xy), np.ascontiguousarray(mesh.faces), y.min(axis=1), y.max(axis=1), y.mean(axis=1)
+        )
 
-    def footprints(self, grid: _Grid, channel: np.ndarray, channels: int,
-                   band: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    def footprints(
+        self, grid: _Grid, channel: np.ndarray, channels: int, band: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> np.ndarray:
         """(channels, rows, cols): the cells covered by the top-down projection of each triangle with
         ``channel[t] >= 0``, in its channel; with ``band`` (per-cell height limits) only where the
         triangle's height span meets the cell's band."""
         out = np.zeros((channels, grid.rows, grid.cols), np.bool_)
         if band is None:
             band = (np.full(out.shape[1:], -np.inf), np.full(out.shape[1:], np.inf))
-        _rasterise_footprints(self.xy, self.faces, np.ascontiguousarray(channel, np.int64), self.lo, self.hi,
-                              np.ascontiguousarray(band[0], np.float64), np.ascontiguousarray(band[1], np.float64),
-                              out)
+        _rasterise_footprints(
+            self.xy,
+            self.faces,
+            np.ascontiguousarray(channel, np.int64),
+            self.lo,
+            self.hi,
+            np.ascontiguousarray(band[0], np.float64),
+            np.ascontiguousarray(band[1], np.float64),
+            out,
+        )
         return out
 
 
@@ -397,8 +413,17 @@ def _rasterise_footprints(xy, tris, channel, zlo, zhi, band_lo, band_hi, out):
             n = int(max(abs(qx - px), abs(qy - py)) * 2.0) + 1
             for i in range(n + 1):
                 s = i / n
-                _mark(int(math.floor(px + s * (qx - px))), int(math.floor(py + s * (qy - py))), k, t, zlo, zhi,
-                      band_lo, band_hi, out)
+                _mark(
+                    int(math.floor(px + s * (qx - px))),
+                    int(math.floor(py + s * (qy - py))),
+                    k,
+                    t,
+                    zlo,
+                    zhi,
+                    band_lo,
+                    band_hi,
+                    out,
+                )
         area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
         if abs(area) < 1e-12:
             continue
@@ -453,8 +478,10 @@ def _navigable(proj: _Projection, grid: _Grid, hits: _Hits, level: float, cfg: S
     agent radius, islands dropped."""
     height = _floor_heights(grid, hits, level, cfg.max_climb_m)
     standing = np.isfinite(height)
-    band = (np.where(standing, height + cfg.max_climb_m, np.inf),
-            np.where(standing, height + cfg.camera_height_m, -np.inf))
+    band = (
+        np.where(standing, height + cfg.max_climb_m, np.inf),
+        np.where(standing, height + cfg.camera_height_m, -np.inf),
+    )
     clear = standing & ~proj.footprints(grid, np.zeros(len(proj.faces), np.int64), 1, band)[0]
     navigable = ndi.distance_transform_edt(clear) * GRID_M > cfg.agent_radius_m
     labels, n = ndi.label(navigable, structure=np.ones((3, 3), bool))
@@ -465,8 +492,14 @@ def _navigable(proj: _Projection, grid: _Grid, hits: _Hits, level: float, cfg: S
     return navigable
 
 
-def load_scan(name: str, files: ScanFiles, cfg: SimConfig, *, goal_instances: dict[int, str],
-              view_points: list[tuple[str, tuple[float, float, float]]]) -> dict[int, ScanFloor]:
+def load_scan(
+    name: str,
+    files: ScanFiles,
+    cfg: SimConfig,
+    *,
+    goal_instances: dict[int, str],
+    view_points: list[tuple[str, tuple[float, float, float]]],
+) -> dict[int, ScanFloor]:
     """The floors of one scan, each with its world mesh, ground-truth grid and view points.
 
     ``goal_instances``: object id -> our category for the instances an episode file names as goals;
@@ -489,8 +522,10 @@ def load_scan(name: str, files: ScanFiles, cfg: SimConfig, *, goal_instances: di
     hits = _downward_hits(stage, grid, cfg.camera_height_m)
     levels = find_floors(hits)
     if not levels:
-        raise L3MVNError(f"scan {name} ({files.stage}): no floor found (no level surface of {FLOOR_MIN_AREA_M2} m2 "
-                         f"with {cfg.camera_height_m} m of headroom); is the stage's up axis right?")
+        raise L3MVNError(
+            f"scan {name} ({files.stage}): no floor found (no level surface of {FLOOR_MIN_AREA_M2} m2 "
+            f"with {cfg.camera_height_m} m of headroom); is the stage's up axis right?"
+        )
     proj = _Projection.of(stage, grid)
     floors: dict[int, ScanFloor] = {}
     for f, level in enumerate(levels):
@@ -502,18 +537,26 @@ def load_scan(name: str, files: ScanFiles, cfg: SimConfig, *, goal_instances: di
         objects = proj.footprints(grid, np.where(on_floor, tri_category - 1, -1), len(SCAN_CATEGORIES))
         shown = (proj.centre >= level - BELOW_FLOOR_M) & (proj.centre < top - 0.5 * cfg.max_climb_m)
         floors[f] = ScanFloor(
-            name=name, floor=f, categories=SCAN_CATEGORIES, navigable=navigable, objects=objects,
-            origin_cm=(grid.z0 * 100.0, grid.x0 * 100.0), floor_height_m=level, resolution_m=GRID_M,
+            name=name,
+            floor=f,
+            categories=SCAN_CATEGORIES,
+            navigable=navigable,
+            objects=objects,
+            origin_cm=(grid.z0 * 100.0, grid.x0 * 100.0),
+            floor_height_m=level,
+            resolution_m=GRID_M,
             mesh=_floor_mesh(stage, shown, tri_category, grid, level, cfg.scan_vertex_merge_m),
-            view_points=_floor_view_points(view_points, grid, level, top), source=str(files.stage),
+            view_points=_floor_view_points(view_points, grid, level, top),
+            source=str(files.stage),
         )
     if not floors:
         raise L3MVNError(f"scan {name}: no floor has navigable room for a {cfg.agent_radius_m} m agent")
     return floors
 
 
-def _floor_mesh(stage: _Mesh, keep: np.ndarray, tri_category: np.ndarray, grid: _Grid, level: float,
-                merge_m: float) -> ScanMesh:
+def _floor_mesh(
+    stage: _Mesh, keep: np.ndarray, tri_category: np.ndarray, grid: _Grid, level: float, merge_m: float
+) -> ScanMesh:
     """The kept triangles in our frame (x = habitat z, y = habitat x, from the grid origin; z up),
     vertices closer than ``merge_m`` merged (vertex clustering): the rasteriser's cost grows with the
     triangle count, and a scan's finest triangles are smaller than a pixel of the agent's frames.

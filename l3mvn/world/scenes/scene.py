@@ -14,10 +14,11 @@ from typing import cast, overload
 import numpy as np
 from scipy import ndimage as ndi
 
+from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.grid import disk
-from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.types import Pose, wrap_angle
+
 
 @dataclass(frozen=True, eq=False)
 class SceneMap:
@@ -41,17 +42,14 @@ class SceneMap:
         if not (isinstance(nav, np.ndarray) and isinstance(obj, np.ndarray)):
             raise L3MVNError(f"scene {self.name}: navigable and objects must be numpy arrays")
         if nav.dtype.kind not in "biuf" or obj.dtype.kind not in "biuf":
-            raise L3MVNError(f"scene {self.name}: navigable and objects must be numeric arrays, "
-                             f"got {nav.dtype} and {obj.dtype}")
+            raise L3MVNError(
+                f"scene {self.name}: navigable and objects must be numeric arrays, got {nav.dtype} and {obj.dtype}"
+            )
         self._check_geometry()
         if nav.ndim != 2 or obj.ndim != 3 or obj.shape[1:] != nav.shape:
-            raise L3MVNError(
-                f"scene {self.name}: navigable {nav.shape} and objects {obj.shape} shapes disagree"
-            )
+            raise L3MVNError(f"scene {self.name}: navigable {nav.shape} and objects {obj.shape} shapes disagree")
         if obj.shape[0] != len(self.categories):
-            raise L3MVNError(
-                f"scene {self.name}: {obj.shape[0]} object channels for {len(self.categories)} categories"
-            )
+            raise L3MVNError(f"scene {self.name}: {obj.shape[0]} object channels for {len(self.categories)} categories")
         if not nav.any():
             raise L3MVNError(f"scene {self.name} floor {self.floor}: no navigable cell")
         object.__setattr__(self, "navigable", nav.astype(bool, copy=False))
@@ -60,8 +58,9 @@ class SceneMap:
     def _check_geometry(self) -> None:
         """Non-finite or non-positive geometry would turn every pose conversion into NaN or an overflow."""
         if not (math.isfinite(self.resolution_m) and self.resolution_m > 0):
-            raise L3MVNError(f"scene {self.name}: resolution_m must be a positive finite number, "
-                             f"got {self.resolution_m}")
+            raise L3MVNError(
+                f"scene {self.name}: resolution_m must be a positive finite number, got {self.resolution_m}"
+            )
         if len(self.origin_cm) != 2 or not all(math.isfinite(v) for v in self.origin_cm):
             raise L3MVNError(f"scene {self.name}: origin_cm must be two finite numbers, got {self.origin_cm}")
         if not math.isfinite(self.floor_height_m):
@@ -98,9 +97,7 @@ class SceneMap:
 
     def category_mask(self, category: str) -> np.ndarray:
         if category not in self.categories:
-            raise L3MVNError(
-                f"unknown category {category!r} in scene {self.name}; valid: {', '.join(self.categories)}"
-            )
+            raise L3MVNError(f"unknown category {category!r} in scene {self.name}; valid: {', '.join(self.categories)}")
         return self.objects[self.categories.index(category)]
 
     def present_goals(self, goals: tuple[str, ...] = GOAL_CATEGORIES) -> list[str]:
@@ -116,8 +113,9 @@ class SceneMap:
     @overload
     def cell_center(self, row: np.ndarray, col: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
 
-    def cell_center(self, row: float | np.ndarray,
-                    col: float | np.ndarray) -> tuple[float | np.ndarray, float | np.ndarray]:
+    def cell_center(
+        self, row: float | np.ndarray, col: float | np.ndarray
+    ) -> tuple[float | np.ndarray, float | np.ndarray]:
         """World (x, y) of a cell's centre (element-wise for arrays of rows and columns)."""
         return (col + 0.5) * self.resolution_m, (row + 0.5) * self.resolution_m
 
@@ -141,8 +139,10 @@ class SceneMap:
         """The grid's extent for error messages, in our frame and in the Habitat frame of episode files."""
         width, height = self.extent_m
         ox, oy = self.origin_cm[0] / 100.0, self.origin_cm[1] / 100.0
-        return (f"x 0..{width:.2f} m, y 0..{height:.2f} m (Habitat p2 {ox:.2f}..{ox + width:.2f}, "
-                f"p0 {oy:.2f}..{oy + height:.2f})")
+        return (
+            f"x 0..{width:.2f} m, y 0..{height:.2f} m (Habitat p2 {ox:.2f}..{ox + width:.2f}, "
+            f"p0 {oy:.2f}..{oy + height:.2f})"
+        )
 
     def pose_from_habitat(self, position: list[float], rotation_wxyz: list[float]) -> Pose:
         """Habitat position ``[p0, p1 (up), p2]`` and a (w, x, y, z) yaw quaternion -> our pose.
@@ -162,4 +162,3 @@ class SceneMap:
         position = [pose.y + oy / 100.0, self.floor_height_m, pose.x + ox / 100.0]
         rotation = [math.cos(yaw / 2.0), 0.0, math.sin(yaw / 2.0), 0.0]
         return position, rotation
-

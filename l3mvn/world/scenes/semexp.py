@@ -12,12 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
+from l3mvn.core.categories import GIBSON_CATEGORIES
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.paths import plain_name
-from l3mvn.world.scenes.map_pickle import load_map_pickle
-from l3mvn.core.categories import GIBSON_CATEGORIES
-from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.core.writing import write_file
+from l3mvn.world.scenes.map_pickle import load_map_pickle
+from l3mvn.world.scenes.scene import SceneMap
 
 # Coordinates (origin, floor height) beyond this many metres are no building's: they only turn
 # later arithmetic into overflows (10,000 km is far past any real map and far below float range).
@@ -73,8 +73,19 @@ def read_info(path: Path) -> object:
             return load_map_pickle(fh)
     except pickle.UnpicklingError as exc:
         raise L3MVNError(f"{path} is not a SemExp map file ({' '.join(str(exc).split())})") from None
-    except (OSError, EOFError, ValueError, AttributeError, ImportError, TypeError, IndexError, KeyError,
-            OverflowError, RecursionError, MemoryError) as exc:
+    except (
+        OSError,
+        EOFError,
+        ValueError,
+        AttributeError,
+        ImportError,
+        TypeError,
+        IndexError,
+        KeyError,
+        OverflowError,
+        RecursionError,
+        MemoryError,
+    ) as exc:
         raise L3MVNError(f"{path} is corrupt or truncated ({type(exc).__name__}: {_show(str(exc))})") from None
 
 
@@ -131,21 +142,32 @@ def _floor_from_record(path: Path, name: str, floor: int, rec: object, scene_kwa
     sem = _sem_map(where, rec["sem_map"])
     missing = [k for k in RECORD_KEYS if k not in rec]
     if missing:
-        raise L3MVNError(f"{where}: record lacks {', '.join(map(repr, missing))} "
-                         f"(the format has {', '.join(RECORD_KEYS)})")
+        raise L3MVNError(
+            f"{where}: record lacks {', '.join(map(repr, missing))} (the format has {', '.join(RECORD_KEYS)})"
+        )
     origin = _numeric_array(where, "origin", rec["origin"]).astype(np.float64)
     if origin.shape != (2,) or not (np.abs(origin) <= MAX_COORDINATE_M * 100).all():
-        raise L3MVNError(f"{where}: origin must be two finite numbers (ox_cm, oy_cm) within "
-                         f"{MAX_COORDINATE_M * 100:.0e} cm, got {_show(rec['origin'])}")
+        raise L3MVNError(
+            f"{where}: origin must be two finite numbers (ox_cm, oy_cm) within "
+            f"{MAX_COORDINATE_M * 100:.0e} cm, got {_show(rec['origin'])}"
+        )
     height = _numeric_array(where, "floor_height", rec["floor_height"])
     if height.shape != () or not abs(float(height)) <= MAX_COORDINATE_M:
-        raise L3MVNError(f"{where}: floor_height must be one finite number within {MAX_COORDINATE_M:.0e} m, "
-                         f"got {_show(rec['floor_height'])}")
+        raise L3MVNError(
+            f"{where}: floor_height must be one finite number within {MAX_COORDINATE_M:.0e} m, "
+            f"got {_show(rec['floor_height'])}"
+        )
     cats = GIBSON_CATEGORIES[: sem.shape[0] - 1]
     try:
         return SceneMap(
-            name=name, floor=floor, categories=cats, navigable=sem[0] > 0.5, objects=sem[1:] > 0.5,
-            origin_cm=(float(origin[0]), float(origin[1])), floor_height_m=float(height), **scene_kwargs,
+            name=name,
+            floor=floor,
+            categories=cats,
+            navigable=sem[0] > 0.5,
+            objects=sem[1:] > 0.5,
+            origin_cm=(float(origin[0]), float(origin[1])),
+            floor_height_m=float(height),
+            **scene_kwargs,
         )
     except L3MVNError as exc:
         raise L3MVNError(f"{path}: {exc}") from None
@@ -155,8 +177,10 @@ def _sem_map(where: str, value: object) -> np.ndarray:
     """(1 + categories, H, W) of finite numbers: channel 0 navigable, then the format's categories."""
     sem = _numeric_array(where, "sem_map", value)
     if sem.ndim != 3 or sem.shape[0] < 2 or 0 in sem.shape:
-        raise L3MVNError(f"{where}: sem_map must be (channels, H, W) with 2-{len(GIBSON_CATEGORIES) + 1} "
-                         f"channels, got shape {sem.shape}")
+        raise L3MVNError(
+            f"{where}: sem_map must be (channels, H, W) with 2-{len(GIBSON_CATEGORIES) + 1} "
+            f"channels, got shape {sem.shape}"
+        )
     if sem.shape[0] - 1 > len(GIBSON_CATEGORIES):
         raise L3MVNError(f"{where}: {sem.shape[0] - 1} object channels, the format defines {len(GIBSON_CATEGORIES)}")
     if not np.isfinite(sem).all():
@@ -179,12 +203,19 @@ def _numeric_array(where: str, key: str, value: object) -> np.ndarray:
 
 def to_semexp_channels(scene: SceneMap) -> SceneMap:
     """The same floor with only the 15 SemExp categories (richer vocabularies drop the rest)."""
-    objects = np.stack([
-        scene.category_mask(c) if c in scene.categories else np.zeros(scene.shape, bool) for c in GIBSON_CATEGORIES
-    ])
-    return SceneMap(name=scene.name, floor=scene.floor, categories=GIBSON_CATEGORIES, navigable=scene.navigable,
-                    objects=objects, origin_cm=scene.origin_cm, floor_height_m=scene.floor_height_m,
-                    resolution_m=scene.resolution_m)
+    objects = np.stack(
+        [scene.category_mask(c) if c in scene.categories else np.zeros(scene.shape, bool) for c in GIBSON_CATEGORIES]
+    )
+    return SceneMap(
+        name=scene.name,
+        floor=scene.floor,
+        categories=GIBSON_CATEGORIES,
+        navigable=scene.navigable,
+        objects=objects,
+        origin_cm=scene.origin_cm,
+        floor_height_m=scene.floor_height_m,
+        resolution_m=scene.resolution_m,
+    )
 
 
 def save_split(dataset: str | Path, split: str, scenes: list[SceneMap]) -> Path:
@@ -196,6 +227,8 @@ def save_split(dataset: str | Path, split: str, scenes: list[SceneMap]) -> Path:
             raise L3MVNError(f"scene {s.name}: only the SemExp categories can be written in this format")
         sem = np.concatenate([s.navigable[None], s.objects]).astype(np.float64)
         raw.setdefault(s.name, {})[s.floor] = {
-            "sem_map": sem, "origin": np.asarray(s.origin_cm, dtype=np.int64), "floor_height": s.floor_height_m,
+            "sem_map": sem,
+            "origin": np.asarray(s.origin_cm, dtype=np.int64),
+            "floor_height": s.floor_height_m,
         }
     return write_file(out / f"{split}_info.pbz2", bz2.compress(pickle.dumps(raw)), "map file")

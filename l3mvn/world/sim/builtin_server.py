@@ -17,12 +17,12 @@ import skfmm
 from scipy import ndimage as ndi
 
 from l3mvn.core.config import SimConfig
-from l3mvn.world.scenes.procedural import generate_house
-from l3mvn.world.scenes.scene import SceneMap
-from l3mvn.world.sim.habitat_server import ACTIONS, RequestError, run_server
-from l3mvn.world.sim.simulator import BuiltinSimulator
 from l3mvn.core.types import Action
 from l3mvn.world.episode import Episode
+from l3mvn.world.scenes.procedural import generate_house
+from l3mvn.world.scenes.scene import SceneMap
+from l3mvn.world.sim.habitat_server import ACTIONS, RequestError, read_point, read_rotation, run_server
+from l3mvn.world.sim.simulator import BuiltinSimulator
 
 SCENE_PREFIX = "procedural:"
 
@@ -31,7 +31,7 @@ def parse_scene(spec: object) -> SceneMap:
     """``procedural:SEED`` -> that procedural house (the builtin backend's only scene source)."""
     if not isinstance(spec, str) or not spec.startswith(SCENE_PREFIX):
         raise RequestError(f"scene {spec!r}: the builtin server loads '{SCENE_PREFIX}SEED' scenes only")
-    seed = spec[len(SCENE_PREFIX):]
+    seed = spec[len(SCENE_PREFIX) :]
     if not seed.isdigit():
         raise RequestError(f"scene {spec!r}: SEED must be a non-negative integer")
     return generate_house(int(seed))
@@ -55,9 +55,13 @@ class BuiltinBackend:
             raise RequestError(f"categories {categories} differ from the house's {list(scene.categories)}")
         self.sim = BuiltinSimulator(scene, cfg)
         width, height = scene.extent_m
-        area = float(scene.navigable.sum()) * scene.resolution_m ** 2
-        return {"categories": categories, "objects_matched": int(scene.objects.any(axis=(1, 2)).sum()),
-                "navigable_area_m2": area, "bounds": [[0.0, 0.0, 0.0], [height, cfg.wall_height_m, width]]}, None
+        area = float(scene.navigable.sum()) * scene.resolution_m**2
+        return {
+            "categories": categories,
+            "objects_matched": int(scene.objects.any(axis=(1, 2)).sum()),
+            "navigable_area_m2": area,
+            "bounds": [[0.0, 0.0, 0.0], [height, cfg.wall_height_m, width]],
+        }, None
 
     def _sim(self) -> BuiltinSimulator:
         if self.sim is None:
@@ -67,15 +71,22 @@ class BuiltinBackend:
     def _reply(self, obs, moved: float) -> tuple[dict, dict]:
         scene = self._sim().scene
         position, rotation = scene.pose_to_habitat(obs.pose)
-        return ({"position": position, "rotation": rotation, "tilt_deg": math.degrees(obs.tilt),
-                 "collided": bool(obs.collided), "moved_m": moved},
-                {"rgb": obs.rgb, "depth": obs.depth, "semantic": obs.semantic})
+        return (
+            {
+                "position": position,
+                "rotation": rotation,
+                "tilt_deg": math.degrees(obs.tilt),
+                "collided": bool(obs.collided),
+                "moved_m": moved,
+            },
+            {"rgb": obs.rgb, "depth": obs.depth, "semantic": obs.semantic},
+        )
 
     def op_reset(self, request: dict) -> tuple[dict, dict]:
         sim = self._sim()
         scene = sim.scene
-        # A request without them fails inside (a TypeError), answered like any failed request.
-        pose = scene.pose_from_habitat(request.get("position"), request.get("rotation"))  # type: ignore[arg-type]
+        position = read_point(request.get("position"), "position")
+        pose = scene.pose_from_habitat(list(position), list(read_rotation(request.get("rotation"))))
         goal = request.get("goal", scene.categories[0])
         episode = Episode(episode_id=0, scene=scene.name, floor=scene.floor, start=pose, goal=goal)
         return self._reply(sim.reset(episode), 0.0)
@@ -113,12 +124,7 @@ class BuiltinBackend:
 
     @staticmethod
     def _snap(scene: SceneMap, point: object) -> tuple[int, int]:
-        try:
-            p0, _, p2 = (float(v) for v in point)  # type: ignore[attr-defined]  # any JSON value: TypeError below
-        except (TypeError, ValueError):
-            raise RequestError(f"a point must be three numbers [p0, p1, p2], got {point!r}") from None
-        if not (math.isfinite(p0) and math.isfinite(p2)):
-            raise RequestError(f"a point must be finite, got {point!r}")
+        p0, _, p2 = (float(v) for v in read_point(point, "a point"))
         ox, oy = scene.origin_cm
         h, w = scene.shape
         r = int(np.clip(np.floor((p0 - oy / 100.0) / scene.resolution_m), 0, h - 1))

@@ -31,14 +31,14 @@ import numpy as np
 
 from l3mvn.core.config import SimConfig
 from l3mvn.core.errors import L3MVNError, one_line
+from l3mvn.core.types import Action, Observation, Pose
+from l3mvn.world.episode import Episode
 from l3mvn.world.scenes.categories import RAW_NAMES
-from l3mvn.world.sim.base import EpisodeState
 from l3mvn.world.scenes.scan import ScanFloor
 from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.sim import habitat_server as wire
+from l3mvn.world.sim.base import EpisodeState
 from l3mvn.world.sim.simulator import BuiltinSimulator
-from l3mvn.core.types import Action, Observation, Pose
-from l3mvn.world.episode import Episode
 
 SERVER_SCRIPT = Path(wire.__file__).resolve()
 _CHUNK = 1 << 20
@@ -50,8 +50,10 @@ def habitat_command(python: str | os.PathLike) -> list[str]:
     """The command that starts the habitat server in ``python`` (``--habitat-python``), checked."""
     path = Path(python).expanduser()
     if not path.exists():
-        raise L3MVNError(f"--habitat-python {str(python)!r}: no such file; give the python of the environment "
-                         f"that has habitat-sim (e.g. ~/miniconda3/envs/habitat/bin/python)")
+        raise L3MVNError(
+            f"--habitat-python {str(python)!r}: no such file; give the python of the environment "
+            f"that has habitat-sim (e.g. ~/miniconda3/envs/habitat/bin/python)"
+        )
     if path.is_dir() or not os.access(path, os.X_OK):
         raise L3MVNError(f"--habitat-python {str(python)!r} is not an executable file")
     return [str(path), str(SERVER_SCRIPT)]
@@ -71,8 +73,9 @@ class ServerProcess:
         self._failure: str | None = None
         try:
             # Its own session: a Ctrl-C meant for us does not kill it mid-request; we close it.
-            self._proc = subprocess.Popen(list(argv), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                          stderr=self._stderr, start_new_session=True)
+            self._proc = subprocess.Popen(
+                list(argv), stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr, start_new_session=True
+            )
         except OSError as exc:
             self._stderr.close()
             raise L3MVNError(f"{name}: cannot start {argv[0]!r}: {exc.strerror or exc}") from None
@@ -84,8 +87,10 @@ class ServerProcess:
             raise L3MVNError(one_line(L3MVNError(f"{name} ({argv[0]}) could not start: {error}")))
         if self.hello.get("protocol") != wire.PROTOCOL:
             self.close()
-            raise L3MVNError(f"{name} speaks protocol {self.hello.get('protocol')!r}, we speak {wire.PROTOCOL}: "
-                             f"{SERVER_SCRIPT.name} and this library are from different versions")
+            raise L3MVNError(
+                f"{name} speaks protocol {self.hello.get('protocol')!r}, we speak {wire.PROTOCOL}: "
+                f"{SERVER_SCRIPT.name} and this library are from different versions"
+            )
 
     @property
     def pid(self) -> int:
@@ -139,8 +144,10 @@ class ServerProcess:
             left = deadline - time.monotonic()
             ready = select.select([fd], [], [], max(left, 0.0))[0] if left > 0 else []
             if not ready:
-                self._fail(f"{self.name} answered no {op} request within {self.timeout_s:g} s "
-                           f"(sim.server_timeout_s); stopped it")
+                self._fail(
+                    f"{self.name} answered no {op} request within {self.timeout_s:g} s "
+                    f"(sim.server_timeout_s); stopped it"
+                )
             chunk = os.read(fd, min(n - len(buf), _CHUNK))
             if not chunk:
                 self._fail(self._death(op))
@@ -197,15 +204,27 @@ class BridgeEnvironment(EpisodeState):
     ``SceneMap`` gives the categories, the floor's key and its frame against Habitat's.
     ``scene_path`` is what the server loads (a scan file for habitat-sim)."""
 
-    def __init__(self, server: ServerProcess, scene: SceneMap, scene_path: str, cfg: SimConfig | None = None, *,
-                 category_map: Mapping[str, str] | None = None, scene_dataset_config: str | None = None,
-                 semantic_files: tuple[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        server: ServerProcess,
+        scene: SceneMap,
+        scene_path: str,
+        cfg: SimConfig | None = None,
+        *,
+        category_map: Mapping[str, str] | None = None,
+        scene_dataset_config: str | None = None,
+        semantic_files: tuple[str, str] | None = None,
+    ) -> None:
         self.server, self.scene, self.cfg = server, scene, cfg or SimConfig()
         self.categories = scene.categories
         table = {c: c for c in scene.categories}
         table.update(category_map or {})
-        load = {"scene": str(scene_path), "sim": dataclasses.asdict(self.cfg), "categories": list(self.categories),
-                "category_map": table}
+        load = {
+            "scene": str(scene_path),
+            "sim": dataclasses.asdict(self.cfg),
+            "categories": list(self.categories),
+            "category_map": table,
+        }
         if scene_dataset_config is not None:
             load["scene_dataset_config"] = str(scene_dataset_config)
         if semantic_files is not None:
@@ -213,8 +232,9 @@ class BridgeEnvironment(EpisodeState):
         self.info, _ = server.request("load", **load)
         if tuple(self.info.get("categories", ())) != self.categories:
             server.close()
-            raise L3MVNError(f"{server.name} serves categories {self.info.get('categories')}, "
-                             f"not {list(self.categories)}")
+            raise L3MVNError(
+                f"{server.name} serves categories {self.info.get('categories')}, not {list(self.categories)}"
+            )
         self._episode: Episode | None = None
         self._pose: Pose | None = None
         self._steps = 0
@@ -288,23 +308,43 @@ class BridgeEnvironment(EpisodeState):
         self._pose = self.scene.pose_from_habitat(reply["position"], reply["rotation"])
         assert self._episode is not None
         return Observation(
-            rgb=arrays["rgb"], depth=arrays["depth"], semantic=arrays["semantic"], pose=self._pose,
-            tilt=math.radians(float(reply["tilt_deg"])), goal=self._episode.goal, step=self._steps,
-            collided=bool(reply["collided"]), categories=self.categories,
+            rgb=arrays["rgb"],
+            depth=arrays["depth"],
+            semantic=arrays["semantic"],
+            pose=self._pose,
+            tilt=math.radians(float(reply["tilt_deg"])),
+            goal=self._episode.goal,
+            step=self._steps,
+            collided=bool(reply["collided"]),
+            categories=self.categories,
         )
 
 
-def start_environment(argv: Sequence[str], scene: SceneMap, scene_path: str, cfg: SimConfig | None = None, *,
-                      name: str = "habitat server", category_map: Mapping[str, str] | None = None,
-                      scene_dataset_config: str | None = None,
-                      semantic_files: tuple[str, str] | None = None) -> BridgeEnvironment:
+def start_environment(
+    argv: Sequence[str],
+    scene: SceneMap,
+    scene_path: str,
+    cfg: SimConfig | None = None,
+    *,
+    name: str = "habitat server",
+    category_map: Mapping[str, str] | None = None,
+    scene_dataset_config: str | None = None,
+    semantic_files: tuple[str, str] | None = None,
+) -> BridgeEnvironment:
     """Start the server ``argv`` and load ``scene_path`` for the floor ``scene``; the server is
     stopped again if the load fails."""
     cfg = cfg or SimConfig()
     server = ServerProcess(argv, timeout_s=cfg.server_timeout_s, name=name)
     try:
-        return BridgeEnvironment(server, scene, scene_path, cfg, category_map=category_map,
-                                 scene_dataset_config=scene_dataset_config, semantic_files=semantic_files)
+        return BridgeEnvironment(
+            server,
+            scene,
+            scene_path,
+            cfg,
+            category_map=category_map,
+            scene_dataset_config=scene_dataset_config,
+            semantic_files=semantic_files,
+        )
     except BaseException:
         server.close()
         raise
@@ -319,26 +359,48 @@ def hm3d_semantic_files(stage: str | os.PathLike) -> tuple[str, str] | None:
     return (str(mesh), str(table)) if mesh.is_file() and table.is_file() else None
 
 
-def habitat_environment(python: str | os.PathLike, scene: SceneMap, scene_path: str, cfg: SimConfig | None = None,
-                        *, category_map: Mapping[str, str] | None = None,
-                        scene_dataset_config: str | None = None) -> BridgeEnvironment:
+def habitat_environment(
+    python: str | os.PathLike,
+    scene: SceneMap,
+    scene_path: str,
+    cfg: SimConfig | None = None,
+    *,
+    category_map: Mapping[str, str] | None = None,
+    scene_dataset_config: str | None = None,
+) -> BridgeEnvironment:
     """habitat-sim in ``python`` serving the scan ``scene_path`` for the floor ``scene`` (``--sim
     habitat``), with its HM3D semantic files when they lie beside it."""
-    return start_environment(habitat_command(python), scene, scene_path, cfg, category_map=category_map,
-                             scene_dataset_config=scene_dataset_config,
-                             semantic_files=hm3d_semantic_files(scene_path))
+    return start_environment(
+        habitat_command(python),
+        scene,
+        scene_path,
+        cfg,
+        category_map=category_map,
+        scene_dataset_config=scene_dataset_config,
+        semantic_files=hm3d_semantic_files(scene_path),
+    )
 
 
-def habitat_floor_environment(python: str | os.PathLike, scene: SceneMap, cfg: SimConfig | None = None
-                              ) -> BridgeEnvironment:
+def habitat_floor_environment(
+    python: str | os.PathLike, scene: SceneMap, cfg: SimConfig | None = None
+) -> BridgeEnvironment:
     """``--sim habitat`` for one floor of a scan dataset: the scan the floor was read from
     (``ScanFloor.source``), the nearest ``*.scene_dataset_config.json`` above it (its up axis and
     stage conventions), HM3D's semantic files beside it, and the raw-name table ``RAW_NAMES``."""
     if not isinstance(scene, ScanFloor) or not scene.source:
-        raise L3MVNError(f"--sim habitat runs scans, and {scene.key} is not one: give --dataset with a habitat "
-                         f"ObjectNav dataset and --scenes with its scan root")
+        raise L3MVNError(
+            f"--sim habitat runs scans, and {scene.key} is not one: give --dataset with a habitat "
+            f"ObjectNav dataset and --scenes with its scan root"
+        )
     stage = Path(scene.source)
-    config = next((found for folder in stage.parents
-                   for found in sorted(folder.glob("*.scene_dataset_config.json"))), None)
-    return habitat_environment(python, scene, str(stage), cfg, category_map=RAW_NAMES,
-                               scene_dataset_config=None if config is None else str(config))
+    config = next(
+        (found for folder in stage.parents for found in sorted(folder.glob("*.scene_dataset_config.json"))), None
+    )
+    return habitat_environment(
+        python,
+        scene,
+        str(stage),
+        cfg,
+        category_map=RAW_NAMES,
+        scene_dataset_config=None if config is None else str(config),
+    )

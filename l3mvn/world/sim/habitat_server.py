@@ -62,8 +62,7 @@ def pack(header, arrays=None):
         a = a.astype(a.dtype.newbyteorder("<"), copy=False) if a.dtype.byteorder == ">" else a
         if a.dtype.str not in DTYPES:
             raise ProtocolError(f"array {name!r} has dtype {a.dtype}; the wire carries {', '.join(DTYPES)}")
-        specs.append({"name": name, "dtype": a.dtype.str, "shape": list(a.shape), "offset": offset,
-                      "nbytes": a.nbytes})
+        specs.append({"name": name, "dtype": a.dtype.str, "shape": list(a.shape), "offset": offset, "nbytes": a.nbytes})
         blobs.append(a.tobytes())
         offset += a.nbytes
     body = dict(header)
@@ -87,7 +86,7 @@ def parse_body(header_bytes, payload):
     try:
         header = json.loads(header_bytes.decode("utf-8"))
     except ValueError as exc:
-        raise ProtocolError(f"frame header is not JSON: {exc}")
+        raise ProtocolError(f"frame header is not JSON: {exc}") from None
     if not isinstance(header, dict) or not isinstance(header.get("arrays", []), list):
         raise ProtocolError("frame header must be a JSON object with an 'arrays' list")
     arrays = {}
@@ -96,13 +95,14 @@ def parse_body(header_bytes, payload):
             name, dtype, shape = spec["name"], spec["dtype"], [int(n) for n in spec["shape"]]
             offset, nbytes = int(spec["offset"]), int(spec["nbytes"])
         except (KeyError, TypeError, ValueError):
-            raise ProtocolError(f"malformed array spec {spec!r}")
+            raise ProtocolError(f"malformed array spec {spec!r}") from None
         if dtype not in DTYPES or any(n < 0 for n in shape):
             raise ProtocolError(f"array {name!r}: dtype {dtype!r} or shape {shape!r} not allowed")
         count = int(np.prod(shape, dtype=np.int64))
         if count * np.dtype(dtype).itemsize != nbytes or offset < 0 or offset + nbytes > len(payload):
-            raise ProtocolError(f"array {name!r}: {nbytes} bytes at {offset} do not fit shape {shape} "
-                                f"in a {len(payload)}-byte payload")
+            raise ProtocolError(
+                f"array {name!r}: {nbytes} bytes at {offset} do not fit shape {shape} in a {len(payload)}-byte payload"
+            )
         arrays[name] = np.frombuffer(payload, dtype=dtype, count=count, offset=offset).reshape(shape)
     return header, arrays
 
@@ -144,8 +144,16 @@ def serve(make_backend, inp, out):
         write_frame(out, {"ok": False, "error": _first_line(exc)})
         traceback.print_exc()
         return 1
-    write_frame(out, {"ok": True, "protocol": PROTOCOL, "backend": backend.name, "versions": backend.versions(),
-                      "python": sys.version.split()[0]})
+    write_frame(
+        out,
+        {
+            "ok": True,
+            "protocol": PROTOCOL,
+            "backend": backend.name,
+            "versions": backend.versions(),
+            "python": sys.version.split()[0],
+        },
+    )
     try:
         while True:
             frame = read_frame(inp)
@@ -189,21 +197,23 @@ def _num(request, section, name):
     return value
 
 
-def _point(value, what):
+def read_point(value, what):
+    """A request's [p0, p1, p2] point as three finite floats, else a RequestError naming ``what``."""
     try:
         p = np.asarray(value, dtype=np.float64).reshape(3)
     except (TypeError, ValueError):
-        raise RequestError(f"{what} must be three numbers [p0, p1, p2], got {value!r}")
+        raise RequestError(f"{what} must be three numbers [p0, p1, p2], got {value!r}") from None
     if not np.isfinite(p).all():
         raise RequestError(f"{what} must be finite, got {value!r}")
     return p
 
 
-def _rotation(value):
+def read_rotation(value):
+    """A request's (w, x, y, z) quaternion, normalised, else a RequestError."""
     try:
         w, x, y, z = (float(v) for v in value)
     except (TypeError, ValueError):
-        raise RequestError(f"rotation must be a (w, x, y, z) quaternion, got {value!r}")
+        raise RequestError(f"rotation must be a (w, x, y, z) quaternion, got {value!r}") from None
     norm = math.sqrt(w * w + x * x + y * y + z * z)
     if not math.isfinite(norm) or norm < 1e-6:
         raise RequestError(f"rotation must be a finite non-zero quaternion, got {value!r}")
@@ -247,9 +257,21 @@ class HabitatBackend:
         if not categories or not isinstance(table, dict):
             raise RequestError("load needs a non-empty 'categories' list and a 'category_map' object")
         h, w = int(_num(request, "sim", "frame_height")), int(_num(request, "sim", "frame_width"))
-        self.cfg = {k: _num(request, "sim", k) for k in (
-            "hfov_deg", "camera_height_m", "min_depth_m", "max_depth_m", "forward_step_m", "turn_angle_deg",
-            "tilt_angle_deg", "min_tilt_deg", "max_tilt_deg", "agent_radius_m")}
+        self.cfg = {
+            k: _num(request, "sim", k)
+            for k in (
+                "hfov_deg",
+                "camera_height_m",
+                "min_depth_m",
+                "max_depth_m",
+                "forward_step_m",
+                "turn_angle_deg",
+                "tilt_angle_deg",
+                "min_tilt_deg",
+                "max_tilt_deg",
+                "agent_radius_m",
+            )
+        }
         cfg = self.cfg
         self.close()
 
@@ -264,8 +286,11 @@ class HabitatBackend:
         sim_cfg.load_semantic_mesh = True
         sim_cfg.create_renderer = True
         sensors = []
-        for uuid, kind in (("rgb", hs.SensorType.COLOR), ("depth", hs.SensorType.DEPTH),
-                           ("semantic", hs.SensorType.SEMANTIC)):
+        for uuid, kind in (
+            ("rgb", hs.SensorType.COLOR),
+            ("depth", hs.SensorType.DEPTH),
+            ("semantic", hs.SensorType.SEMANTIC),
+        ):
             spec = hs.CameraSensorSpec()
             spec.uuid, spec.sensor_type, spec.resolution = uuid, kind, [h, w]
             spec.position = [0.0, cfg["camera_height_m"], 0.0]
@@ -275,11 +300,16 @@ class HabitatBackend:
         agent_cfg.height = cfg["camera_height_m"]  # the camera sits at the top of the body, as in ObjectNav
         agent_cfg.radius = cfg["agent_radius_m"]
         agent_cfg.sensor_specifications = sensors
-        amounts = {"move_forward": cfg["forward_step_m"], "turn_left": cfg["turn_angle_deg"],
-                   "turn_right": cfg["turn_angle_deg"], "look_up": cfg["tilt_angle_deg"],
-                   "look_down": cfg["tilt_angle_deg"]}
+        amounts = {
+            "move_forward": cfg["forward_step_m"],
+            "turn_left": cfg["turn_angle_deg"],
+            "turn_right": cfg["turn_angle_deg"],
+            "look_up": cfg["tilt_angle_deg"],
+            "look_down": cfg["tilt_angle_deg"],
+        }
         agent_cfg.action_space = {
-            name: hs.agent.ActionSpec(name, hs.agent.ActuationSpec(amount=amount)) for name, amount in amounts.items()}
+            name: hs.agent.ActionSpec(name, hs.agent.ActuationSpec(amount=amount)) for name, amount in amounts.items()
+        }
         config = hs.Configuration(sim_cfg, [agent_cfg])
         semantic_mesh, descriptor = request.get("semantic_mesh"), request.get("semantic_descriptor")
         if semantic_mesh or descriptor:
@@ -298,13 +328,15 @@ class HabitatBackend:
         if not self.sim.recompute_navmesh(self.sim.pathfinder, settings):
             raise RequestError(f"habitat could not build a navmesh for {scene}")
 
-        self.lut, matched = self._category_lut(categories, {str(k).strip().lower(): str(v)
-                                                                for k, v in table.items()})
+        self.lut, matched = self._category_lut(categories, {str(k).strip().lower(): str(v) for k, v in table.items()})
         pf = self.sim.pathfinder
         lower, upper = pf.get_bounds()
-        return {"categories": categories, "objects_matched": matched,
-                "navigable_area_m2": float(pf.navigable_area),
-                "bounds": [[float(v) for v in lower], [float(v) for v in upper]]}, None
+        return {
+            "categories": categories,
+            "objects_matched": matched,
+            "navigable_area_m2": float(pf.navigable_area),
+            "bounds": [[float(v) for v in lower], [float(v) for v in upper]],
+        }, None
 
     def _semantic_stage(self, sim_cfg, mesh, descriptor):
         """A stage template naming the scan's semantic mesh and table (HM3D's ``X.semantic.glb`` and
@@ -348,25 +380,31 @@ class HabitatBackend:
         x, y, z, w = (float(v) for v in self.common.quat_to_coeffs(state.rotation))
         rgb = np.asarray(observations["rgb"])[..., :3]
         depth = np.asarray(observations["depth"], dtype=np.float32).reshape(rgb.shape[:2])
-        depth = np.where((depth >= self.cfg["min_depth_m"]) & (depth <= self.cfg["max_depth_m"]), depth,
-                         np.float32(0.0)).astype(np.float32)
+        depth = np.where(
+            (depth >= self.cfg["min_depth_m"]) & (depth <= self.cfg["max_depth_m"]), depth, np.float32(0.0)
+        ).astype(np.float32)
         raw = np.asarray(observations["semantic"]).reshape(rgb.shape[:2]).astype(np.int64)
         semantic = np.where(raw < len(self.lut), self.lut[np.clip(raw, 0, len(self.lut) - 1)], 0).astype(np.int32)
-        reply = {"position": [float(v) for v in state.position], "rotation": [w, x, y, z],
-                 "tilt_deg": self.tilt_deg, "collided": bool(collided), "moved_m": float(moved)}
+        reply = {
+            "position": [float(v) for v in state.position],
+            "rotation": [w, x, y, z],
+            "tilt_deg": self.tilt_deg,
+            "collided": bool(collided),
+            "moved_m": float(moved),
+        }
         return reply, {"rgb": rgb, "depth": depth, "semantic": semantic}
 
     def op_reset(self, request):
         agent = self._agent()
         assert self.sim is not None  # _agent() refuses a request before load
-        target = _point(request.get("position"), "position")
+        target = read_point(request.get("position"), "position")
         snapped = np.asarray(self.sim.pathfinder.snap_point(target), dtype=np.float64)
         # The navmesh is eroded by the agent radius: a start within one radius of it is that spot.
         off = math.hypot(snapped[0] - target[0], snapped[2] - target[2]) if np.isfinite(snapped).all() else math.inf
         if off > self.cfg["agent_radius_m"]:
             where = ", ".join(f"{v:.2f}" for v in target)
             raise RequestError(f"start [{where}] is {off:.2f} m from habitat's navmesh")
-        w, x, y, z = _rotation(request.get("rotation"))
+        w, x, y, z = read_rotation(request.get("rotation"))
         state = self.hs.AgentState()
         state.position = snapped.astype(np.float32)
         state.rotation = self.common.quat_from_coeffs([x, y, z, w])
@@ -384,8 +422,10 @@ class HabitatBackend:
         if action in ("look_up", "look_down"):
             # habitat's look actions do not clamp: turn by what is left before our tilt limit.
             sign = 1.0 if action == "look_up" else -1.0
-            tilt = min(max(self.tilt_deg + sign * self.cfg["tilt_angle_deg"], self.cfg["min_tilt_deg"]),
-                       self.cfg["max_tilt_deg"])
+            tilt = min(
+                max(self.tilt_deg + sign * self.cfg["tilt_angle_deg"], self.cfg["min_tilt_deg"]),
+                self.cfg["max_tilt_deg"],
+            )
             delta, self.tilt_deg = abs(tilt - self.tilt_deg), tilt
             if delta == 0.0:
                 action = "stop"
@@ -407,8 +447,8 @@ class HabitatBackend:
         if not isinstance(goals, list) or not goals:
             raise RequestError("geodesic needs a non-empty 'goals' list of [p0, p1, p2] points")
         path = self.hs.MultiGoalShortestPath()
-        path.requested_start = _point(request.get("start"), "start").astype(np.float32)
-        path.requested_ends = [_point(g, "goal").astype(np.float32) for g in goals]
+        path.requested_start = read_point(request.get("start"), "start").astype(np.float32)
+        path.requested_ends = [read_point(g, "goal").astype(np.float32) for g in goals]
         found = self.sim.pathfinder.find_path(path)
         distance = float(path.geodesic_distance)
         return {"distance_m": distance if found and math.isfinite(distance) else None}, None

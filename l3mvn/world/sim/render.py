@@ -81,8 +81,18 @@ class Renderer:
         rgb = np.empty((h, w, 3), np.uint8)
         semantic = np.empty((h, w), np.int32)
         _shade(
-            ids, depth, origin, basis, focal, self._color, self._category, self._floor,
-            self.cfg.min_depth_m, self.cfg.max_depth_m, rgb, semantic,
+            ids,
+            depth,
+            origin,
+            basis,
+            focal,
+            self._color,
+            self._category,
+            self._floor,
+            self.cfg.min_depth_m,
+            self.cfg.max_depth_m,
+            rgb,
+            semantic,
         )
         return Frame(rgb=rgb, depth=depth, semantic=semantic)
 
@@ -203,7 +213,6 @@ def _rasterise(vertices, triangles, origin, basis, focal, near, ids, depth):
 
 @nb.njit(cache=True)
 def _shade(ids, depth, origin, basis, focal, color, category, floor, dmin, dmax, rgb, semantic):
-
     """Per pixel: category, shaded colour with floor checker and fog; depth outside range -> 0."""
     h, w = ids.shape
     cx, cy = w / 2.0, h / 2.0

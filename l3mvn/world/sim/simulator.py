@@ -15,11 +15,11 @@ import numpy as np
 
 from l3mvn.core.config import SimConfig
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.types import Action, Observation, Pose, wrap_angle
+from l3mvn.world.episode import Episode
 from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.sim.base import EpisodeState
 from l3mvn.world.sim.render import Renderer
-from l3mvn.core.types import Action, Observation, Pose, wrap_angle
-from l3mvn.world.episode import Episode
 from l3mvn.world.sim.world import build_world
 
 
@@ -48,9 +48,7 @@ class BuiltinSimulator(EpisodeState):
         self._check_goal(episode.goal)
         start = episode.start
         if not self.is_walkable(start.x, start.y):
-            raise L3MVNError(
-                f"episode {episode.key}: start ({start.x:.2f}, {start.y:.2f}) m is off the navigable area"
-            )
+            raise L3MVNError(f"episode {episode.key}: start ({start.x:.2f}, {start.y:.2f}) m is off the navigable area")
         self._episode, self._pose = episode, start
         self._tilt, self._steps, self._path, self._stopped = 0.0, 0, 0.0, False
         return self._observe(collided=False)
@@ -116,10 +114,16 @@ class BuiltinSimulator(EpisodeState):
         assert self._pose is not None and self._episode is not None
         frame = self.renderer.render(self._pose, self._tilt)
         return Observation(
-            rgb=frame.rgb, depth=frame.depth, semantic=frame.semantic, pose=self._pose, tilt=self._tilt,
-            goal=self._episode.goal, step=self._steps, collided=collided, categories=self.categories,
+            rgb=frame.rgb,
+            depth=frame.depth,
+            semantic=frame.semantic,
+            pose=self._pose,
+            tilt=self._tilt,
+            goal=self._episode.goal,
+            step=self._steps,
+            collided=collided,
+            categories=self.categories,
         )
-
 
 
 def random_walkable_pose(scene: SceneMap, rng: np.random.Generator) -> Pose:

@@ -32,9 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage as ndi
 
+from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.config import SimConfig
 from l3mvn.world.scenes.scan import ScanFloor
-from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.world.scenes.scene import SceneMap
 
 _MARGIN_GAP_CELLS = 3.2  # d(object) + d(free) of a ring cell; a 2-cell ring scores 3, a wall >= 4
@@ -185,8 +185,13 @@ def build_world(scene: SceneMap, cfg: SimConfig, *, rooms_only: bool = False) ->
     # Outside the grid counts as wall, so a free cell on the border is still closed in.
     mesh.prism(walls, 0.0, top, category=0, rgb=_WALL_RGB, outside_solid=True, tops=False, smooth=True)
     mesh.prism(
-        furniture, 0.0, min(_FURNITURE_HEIGHT_M, top), category=0, rgb=_FURNITURE_RGB,
-        blocked=walls, smooth=True,
+        furniture,
+        0.0,
+        min(_FURNITURE_HEIGHT_M, top),
+        category=0,
+        rgb=_FURNITURE_RGB,
+        blocked=walls,
+        smooth=True,
     )
     for mask, z0, z1, category, rgb in _object_boxes(scene, top, corridors):
         mesh.prism(mask, z0, z1, category=category, rgb=rgb, blocked=walls, bottoms=z0 > 0.0)
@@ -203,9 +208,13 @@ def scan_world(scene: ScanFloor) -> World:
     length = np.linalg.norm(normal, axis=1, keepdims=True)
     normal = np.where(length > 1e-12, normal / np.maximum(length, 1e-12), (0.0, 0.0, 1.0))
     return World(
-        vertices=mesh.vertices, triangles=mesh.triangles, tri_category=mesh.tri_category,
-        tri_color=mesh.tri_color, tri_normal=np.ascontiguousarray(normal, np.float32),
-        walls=~scene.free & ~scene.object_any, furniture=np.zeros(scene.shape, bool),
+        vertices=mesh.vertices,
+        triangles=mesh.triangles,
+        tri_category=mesh.tri_category,
+        tri_color=mesh.tri_color,
+        tri_normal=np.ascontiguousarray(normal, np.float32),
+        walls=~scene.free & ~scene.object_any,
+        furniture=np.zeros(scene.shape, bool),
     )
 
 
@@ -413,8 +422,17 @@ class _MeshBuilder:
         self._add(corners, (0.0, 0.0, 1.0 if up else -1.0), category, rgb)
 
     def prism(
-        self, mask: np.ndarray, z0: float, z1: float, category: int, rgb, blocked: np.ndarray | None = None,
-        outside_solid: bool = False, tops: bool = True, bottoms: bool = False, smooth: bool = False,
+        self,
+        mask: np.ndarray,
+        z0: float,
+        z1: float,
+        category: int,
+        rgb,
+        blocked: np.ndarray | None = None,
+        outside_solid: bool = False,
+        tops: bool = True,
+        bottoms: bool = False,
+        smooth: bool = False,
     ) -> None:
         """Boundary faces of the cells in ``mask`` extruded over [z0, z1]. Side faces towards cells in
         ``blocked`` (taller solids) are hidden and skipped. ``smooth`` shades each side face with the

@@ -11,6 +11,15 @@ from l3mvn.world.task.regions import GoalRegion, footprint_region, geodesic_fiel
 from l3mvn.world.task.scoring import FAILURE_CAUSES, EpisodeOutcome, EpisodeResult, score_episode
 
 __all__ = [
-    "FAILURE_CAUSES", "EpisodeMeasures", "EpisodeOutcome", "EpisodeResult", "GoalRegion", "ObjectNavTask",
-    "footprint_region", "geodesic_field", "goal_region", "score_episode", "target_visible",
+    "FAILURE_CAUSES",
+    "EpisodeMeasures",
+    "EpisodeOutcome",
+    "EpisodeResult",
+    "GoalRegion",
+    "ObjectNavTask",
+    "footprint_region",
+    "geodesic_field",
+    "goal_region",
+    "score_episode",
+    "target_visible",
 ]

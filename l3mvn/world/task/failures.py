@@ -15,10 +15,14 @@ from l3mvn.core.errors import L3MVNError
 # World: the floor the success rule counts is missing, no path leads to it, or the goal never maps
 # to enough cells from there. Audit reasons map onto these three.
 WORLD_CAUSES = {
-    "no_floor": "world: lost floor", "no_region": "world: lost floor",
+    "no_floor": "world: lost floor",
+    "no_region": "world: lost floor",
     "unreachable": "world: object unreachable",
-    "erased": "world: hidden", "buried": "world: hidden", "occluded": "world: hidden",
-    "outside_only": "world: hidden", "hidden": "world: hidden",
+    "erased": "world: hidden",
+    "buried": "world: hidden",
+    "occluded": "world: hidden",
+    "outside_only": "world: hidden",
+    "hidden": "world: hidden",
 }
 # Agent: the goal could be confirmed, and this is how the agent missed it.
 AGENT_CAUSES = {
@@ -28,9 +32,13 @@ AGENT_CAUSES = {
     "false_stop": "agent: false stop",
     "timeout": "agent: in region, no stop",
 }
-CLASSES = (*dict.fromkeys(WORLD_CAUSES.values()), *dict.fromkeys(AGENT_CAUSES.values()),
-           "agent: glimpsed, not confirmed", "agent: confirmed, not reached",
-           "agent: saw, not reached")  # result lines written before ``extra.confirmed`` existed
+CLASSES = (
+    *dict.fromkeys(WORLD_CAUSES.values()),
+    *dict.fromkeys(AGENT_CAUSES.values()),
+    "agent: glimpsed, not confirmed",
+    "agent: confirmed, not reached",
+    "agent: saw, not reached",
+)  # result lines written before ``extra.confirmed`` existed
 
 
 def classify_failure(row: dict, audit: dict | None) -> str | None:
@@ -58,6 +66,8 @@ def failure_table(rows: list[dict], audits: dict[str, dict]) -> Counter:
     another dataset or without its episode files."""
     missing = [r["key"] for r in rows if not r.get("success") and r["key"] not in audits]
     if missing:
-        raise L3MVNError(f"the audit has no record of {len(missing)} failed episode(s), e.g. {missing[0]}: "
-                         "audit the same dataset and split, with its episode files")
+        raise L3MVNError(
+            f"the audit has no record of {len(missing)} failed episode(s), e.g. {missing[0]}: "
+            "audit the same dataset and split, with its episode files"
+        )
     return Counter(classify_failure(r, audits[r["key"]]) for r in rows if not r.get("success"))

@@ -71,9 +71,14 @@ class EpisodeMeasures:
         """The end state of the episode as scoring reads it."""
         env, goal = self.env, self.episode.goal
         return EpisodeOutcome(
-            stopped=env.stopped, in_success_region=self.task.in_success_region(env.pose, goal), steps=env.steps,
-            path_length_m=env.path_length_m, shortest_path_m=self.task.shortest_path_length(self.episode),
-            final_distance_m=self.task.distance_to_goal(env.pose, goal), saw_target=self.saw_target,
-            entered_region=self.entered_region, recent_collision_rate=self.recent_collision_rate,
+            stopped=env.stopped,
+            in_success_region=self.task.in_success_region(env.pose, goal),
+            steps=env.steps,
+            path_length_m=env.path_length_m,
+            shortest_path_m=self.task.shortest_path_length(self.episode),
+            final_distance_m=self.task.distance_to_goal(env.pose, goal),
+            saw_target=self.saw_target,
+            entered_region=self.entered_region,
+            recent_collision_rate=self.recent_collision_rate,
             coverage=self.coverage(),
         )

@@ -15,9 +15,9 @@ from scipy import ndimage as ndi
 
 from l3mvn.core.config import Config
 from l3mvn.core.config.task import VIEW_POINT_RULES
-from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.core.types import Pose
 from l3mvn.world.episode import Episode
+from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.task.regions import GoalRegion, goal_region
 
 
@@ -55,8 +55,12 @@ class ObjectNavTask:
         grid has a path at all: an episode we cannot walk stays ``no_path``."""
         start = episode.start
         ours = self.region(goal or episode.goal).shortest_path_length(start.x, start.y)
-        if (self.rule in VIEW_POINT_RULES and goal in (None, episode.goal) and math.isfinite(ours)
-                and math.isfinite(episode.geodesic_distance_m)):
+        if (
+            self.rule in VIEW_POINT_RULES
+            and goal in (None, episode.goal)
+            and math.isfinite(ours)
+            and math.isfinite(episode.geodesic_distance_m)
+        ):
             return episode.geodesic_distance_m
         return ours
 

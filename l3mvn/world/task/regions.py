@@ -90,7 +90,8 @@ def goal_region(scene: SceneMap, goal: str, cfg: Config) -> GoalRegion:
     footprint = scene.category_mask(goal)
     if not footprint.any():
         raise L3MVNError(
-            f"goal {goal!r} is not present in scene {scene.key}; present goals: {', '.join(scene.present_goals()) or 'none'}"
+            f"goal {goal!r} is not present in scene {scene.key}; "
+            f"present goals: {', '.join(scene.present_goals()) or 'none'}"
         )
     return footprint_region(scene, footprint, cfg, goal)
 
@@ -102,8 +103,10 @@ def view_point_region(scene: SceneMap, goal: str, cfg: Config) -> GoalRegion:
     are dropped. No view point on this floor: an empty region (every episode for it is ``no_path``)."""
     rule, res = cfg.task.success_rule, scene.resolution_m
     if not isinstance(scene, ScanFloor):
-        raise L3MVNError(f"success rule {rule!r} needs the view points of an ObjectNav episode file; scene "
-                         f"{scene.key} has none: use --rule semexp or geodesic, or a --dataset with --scenes")
+        raise L3MVNError(
+            f"success rule {rule!r} needs the view points of an ObjectNav episode file; scene "
+            f"{scene.key} has none: use --rule semexp or geodesic, or a --dataset with --scenes"
+        )
     trav = scene.traversible
     points = scene.view_points.get(goal, np.zeros((0, 2)))
     sources = np.zeros(trav.shape, bool)
@@ -121,8 +124,14 @@ def view_point_region(scene: SceneMap, goal: str, cfg: Config) -> GoalRegion:
     to_points = geodesic_field(trav, sources, res)
     region = trav & (to_points <= cfg.task.view_point_distance_m)
     dist = geodesic_field(trav, region, res)
-    return GoalRegion(goal=goal, rule=rule, region=region & np.isfinite(dist), distance_m=dist,
-                      length_offset_m=cfg.task.view_point_distance_m if region.any() else 0.0, resolution_m=res)
+    return GoalRegion(
+        goal=goal,
+        rule=rule,
+        region=region & np.isfinite(dist),
+        distance_m=dist,
+        length_offset_m=cfg.task.view_point_distance_m if region.any() else 0.0,
+        resolution_m=res,
+    )
 
 
 def footprint_region(scene: SceneMap, footprint: np.ndarray, cfg: Config, label: str) -> GoalRegion:
@@ -132,8 +141,10 @@ def footprint_region(scene: SceneMap, footprint: np.ndarray, cfg: Config, label:
     trav = scene.traversible
     task = cfg.task
     if task.success_rule in VIEW_POINT_RULES:
-        raise L3MVNError(f"success rule {task.success_rule!r} judges view points, not object footprints: "
-                         "audit with --rule semexp or geodesic")
+        raise L3MVNError(
+            f"success rule {task.success_rule!r} judges view points, not object footprints: "
+            "audit with --rule semexp or geodesic"
+        )
     radius = int(round(task.success_distance_m / res))
     if task.success_rule == "semexp":
         # Dilation by a disk = a Euclidean distance threshold (a 41x41 structuring element is slow).
@@ -148,5 +159,11 @@ def footprint_region(scene: SceneMap, footprint: np.ndarray, cfg: Config, label:
         region = trav & (to_object <= task.success_distance_m)
         dist = geodesic_field(trav, region, res)
         offset = 0.0
-    return GoalRegion(goal=label, rule=task.success_rule, region=region & np.isfinite(dist),
-                      distance_m=dist, length_offset_m=offset, resolution_m=res)
+    return GoalRegion(
+        goal=label,
+        rule=task.success_rule,
+        region=region & np.isfinite(dist),
+        distance_m=dist,
+        length_offset_m=offset,
+        resolution_m=res,
+    )

@@ -50,8 +50,8 @@ class ViewRecord:
     def add(self, obs: Observation, pose: Pose) -> None:
         """Record the frame ``obs`` taken from the true ``pose``."""
         stride = max(1, math.ceil(obs.depth.shape[0] / self.config.task.view_rows))
-        depth = obs.depth[stride // 2::stride, stride // 2::stride]
-        semantic = obs.semantic[stride // 2::stride, stride // 2::stride]
+        depth = obs.depth[stride // 2 :: stride, stride // 2 :: stride]
+        semantic = obs.semantic[stride // 2 :: stride, stride // 2 :: stride]
         intrinsics = self._intrinsics
         if intrinsics is None or (intrinsics.height, intrinsics.width) != depth.shape:
             intrinsics = self._intrinsics = CameraIntrinsics.from_sim(self.config.sim, *depth.shape)
@@ -63,8 +63,12 @@ class ViewRecord:
         floor[valid] = cloud.points[:, 2] < self.config.sim.max_climb_m
         self._mark(self.seen_floor, points[floor])
         self._mark(self.seen_floor, _up_to_first_surface(points, valid, floor, pose, self.scene.resolution_m / 2))
-        self._mark(self.seen_floor, _between(points[:-1][floor[:-1] & floor[1:]], points[1:][floor[:-1] & floor[1:]],
-                                             self.scene.resolution_m / 2))
+        self._mark(
+            self.seen_floor,
+            _between(
+                points[:-1][floor[:-1] & floor[1:]], points[1:][floor[:-1] & floor[1:]], self.scene.resolution_m / 2
+            ),
+        )
         self._mark_body(pose)
         if obs.goal in obs.categories:
             self._mark(self.goal_seen, points[valid & (semantic == obs.goal_id)])
@@ -97,8 +101,9 @@ class ViewRecord:
         self.seen_floor[cells[ok, 0], cells[ok, 1]] = True
 
 
-def _up_to_first_surface(points: np.ndarray, valid: np.ndarray, floor: np.ndarray, pose: Pose,
-                         spacing_m: float) -> np.ndarray:
+def _up_to_first_surface(
+    points: np.ndarray, valid: np.ndarray, floor: np.ndarray, pose: Pose, spacing_m: float
+) -> np.ndarray:
     """Points every ``spacing_m`` from the agent along each pixel column, up to the nearest point of
     the column that is not floor, or (none) to its farthest floor point."""
     reach = np.hypot(points[..., 0] - pose.x, points[..., 1] - pose.y)

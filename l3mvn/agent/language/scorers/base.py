@@ -16,11 +16,11 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from l3mvn.core.errors import L3MVNError
-from l3mvn.core.plugins import discover
 from l3mvn.agent.language.cooccurrence import CooccurrenceStats, load_stats
 from l3mvn.agent.language.queries import zero_shot_query
 from l3mvn.agent.language.vocabulary import GOALS, canonical, check_goal
+from l3mvn.core.errors import L3MVNError
+from l3mvn.core.plugins import discover
 
 ObjectKey = tuple[str, ...]
 OBJECT_FILTERS = ("entropy", "all")
@@ -42,8 +42,9 @@ class Scorer(ABC):
     name: str = ""
     temperature: float = 1.0
 
-    def __init__(self, stats: CooccurrenceStats | None = None, object_filter: str = "entropy",
-                 temperature: float | None = None):
+    def __init__(
+        self, stats: CooccurrenceStats | None = None, object_filter: str = "entropy", temperature: float | None = None
+    ):
         if object_filter not in OBJECT_FILTERS:
             raise L3MVNError(f"unknown object filter {object_filter!r}; valid: {', '.join(OBJECT_FILTERS)}")
         if temperature is not None:
@@ -80,9 +81,9 @@ class Scorer(ABC):
 
     def score_matrix(self, object_sets: Sequence[Iterable[str]]) -> np.ndarray:
         keys = [self.query_objects(s) for s in object_sets]
-        missing = list(dict.fromkeys(
-            (k, g) for k in keys if k for g in self.goals if (tuple(sorted(k)), g) not in self._cache
-        ))
+        missing = list(
+            dict.fromkeys((k, g) for k in keys if k for g in self.goals if (tuple(sorted(k)), g) not in self._cache)
+        )
         n_pairs = sum(len(self.goals) for k in keys if k)
         self._misses += len(missing)
         self._hits += n_pairs - len(missing)
@@ -125,6 +126,7 @@ def register(name: str) -> Callable[[_ScorerClass], _ScorerClass]:
         cls.name = name
         _REGISTRY[name] = cls
         return cls
+
     return wrap
 
 

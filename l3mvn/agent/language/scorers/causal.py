@@ -13,11 +13,11 @@ from typing import TYPE_CHECKING, Any
 
 import torch
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.language.models import load_causal_lm
 from l3mvn.agent.language.queries import object_list, zero_shot_query
 from l3mvn.agent.language.scorers.base import ObjectKey, Scorer, register
 from l3mvn.agent.language.vocabulary import check_goal
+from l3mvn.core.errors import L3MVNError
 
 if TYPE_CHECKING:
     from transformers import PreTrainedModel, PreTrainedTokenizerBase
@@ -29,9 +29,14 @@ TEMPLATES = ("code", "paper")
 class CausalLMScorer(Scorer):
     temperature = 1.0
 
-    def __init__(self, model: str = "gpt2-large", template: str = "code", batch_size: int = 32,
-                 tokenizer_and_model: tuple[PreTrainedTokenizerBase, PreTrainedModel] | None = None,
-                 **kw: Any) -> None:
+    def __init__(
+        self,
+        model: str = "gpt2-large",
+        template: str = "code",
+        batch_size: int = 32,
+        tokenizer_and_model: tuple[PreTrainedTokenizerBase, PreTrainedModel] | None = None,
+        **kw: Any,
+    ) -> None:
         super().__init__(**kw)
         if template not in TEMPLATES:
             raise L3MVNError(f"unknown causal template {template!r}; valid: {', '.join(TEMPLATES)}")

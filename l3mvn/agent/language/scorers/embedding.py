@@ -27,7 +27,14 @@ from l3mvn.agent.language.scorers.base import ObjectKey, Scorer, register
 from l3mvn.agent.language.vocabulary import query_phrase
 
 ROOM_TYPES: tuple[str, ...] = (
-    "bathroom", "bedroom", "living room", "kitchen", "dining room", "office", "hallway", "laundry room",
+    "bathroom",
+    "bedroom",
+    "living room",
+    "kitchen",
+    "dining room",
+    "office",
+    "hallway",
+    "laundry room",
 )
 
 

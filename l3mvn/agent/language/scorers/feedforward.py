@@ -27,8 +27,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.language.head import (
     BAG_FEATURES,
     SHIPPED_HEADS,
@@ -40,6 +38,8 @@ from l3mvn.agent.language.head import (
 from l3mvn.agent.language.models import MINILM, load_sentence_encoder
 from l3mvn.agent.language.queries import feedforward_query
 from l3mvn.agent.language.scorers.base import ObjectKey, Scorer, register
+from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS
+from l3mvn.core.errors import L3MVNError
 
 
 @register("feedforward")
@@ -74,14 +74,17 @@ class FeedForwardScorer(Scorer):
         if self.meta.get("features") == BAG_FEATURES:
             self.vocabulary = tuple(self.meta.get("vocabulary", ()))
             if len(self.vocabulary) != self.head.in_dim:
-                raise L3MVNError(f"head {head}: a vocabulary of {len(self.vocabulary)} objects for a "
-                                 f"{self.head.in_dim}-d input")
+                raise L3MVNError(
+                    f"head {head}: a vocabulary of {len(self.vocabulary)} objects for a {self.head.in_dim}-d input"
+                )
             self.model_name = None
         else:
             self.model_name = model
             self.encoder = load_sentence_encoder(model)
             if self.encoder.dim != self.head.in_dim:
-                raise L3MVNError(f"head {head} expects {self.head.in_dim}-d embeddings; {model!r} gives {self.encoder.dim}")
+                raise L3MVNError(
+                    f"head {head} expects {self.head.in_dim}-d embeddings; {model!r} gives {self.encoder.dim}"
+                )
         self._metres: dict[ObjectKey, np.ndarray] = {}
 
     @property

@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING, Any
 
 import torch
 
-from l3mvn.core.errors import L3MVNError
 from l3mvn.agent.language.models import load_masked_lm
 from l3mvn.agent.language.queries import zero_shot_query
 from l3mvn.agent.language.scorers.base import ObjectKey, Scorer, register
+from l3mvn.core.errors import L3MVNError
 
 if TYPE_CHECKING:
     from transformers import PreTrainedModel, PreTrainedTokenizerBase
@@ -27,9 +27,13 @@ if TYPE_CHECKING:
 class MaskedLMScorer(Scorer):
     temperature = 1.0
 
-    def __init__(self, model: str = "roberta-large", batch_size: int = 64,
-                 tokenizer_and_model: tuple[PreTrainedTokenizerBase, PreTrainedModel] | None = None,
-                 **kw: Any) -> None:
+    def __init__(
+        self,
+        model: str = "roberta-large",
+        batch_size: int = 64,
+        tokenizer_and_model: tuple[PreTrainedTokenizerBase, PreTrainedModel] | None = None,
+        **kw: Any,
+    ) -> None:
         super().__init__(**kw)
         if batch_size < 1:
             raise L3MVNError(f"batch_size must be >= 1, got {batch_size}")
