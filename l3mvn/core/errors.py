@@ -4,6 +4,8 @@ The CLI prints its message as one line and exits non-zero; the server shows it i
 name the offending file or value and the valid choices.
 """
 
+import reprlib
+
 
 class L3MVNError(ValueError):
     """A bad input (file, flag, request) explained in one line."""
@@ -21,3 +23,12 @@ def first_line(exc: BaseException | str) -> str:
     if text:
         return text.splitlines()[0]
     return type(exc).__name__ if isinstance(exc, BaseException) else "no message"
+
+
+def show_value(value: object) -> str:
+    """A bad value quoted in an error message: short and on one line (a whole list could be huge, and
+    numpy's reprs span several lines)."""
+    shape, dtype = getattr(value, "shape", None), getattr(value, "dtype", None)
+    if shape is not None and dtype is not None:
+        return f"an array of shape {shape} and dtype {dtype}"
+    return reprlib.repr(value).replace("\n", " ")

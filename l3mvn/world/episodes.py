@@ -10,7 +10,6 @@ import gzip
 import json
 import math
 import numbers
-import reprlib
 import zlib
 from pathlib import Path
 from typing import TypeGuard
@@ -20,7 +19,7 @@ from scipy import ndimage as ndi
 
 from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.config import Config
-from l3mvn.core.errors import L3MVNError
+from l3mvn.core.errors import L3MVNError, show_value
 from l3mvn.core.types import Pose
 from l3mvn.core.writing import write_file
 from l3mvn.world.episode import Episode
@@ -73,7 +72,7 @@ def read_json_gz(path: Path) -> object:
     except IsADirectoryError:
         raise L3MVNError(f"{path} is a directory, not an episode file") from None
     except (gzip.BadGzipFile, EOFError, zlib.error, ValueError, RecursionError) as exc:
-        raise L3MVNError(f"{path} is corrupt or truncated ({type(exc).__name__}: {_show(str(exc))})") from None
+        raise L3MVNError(f"{path} is corrupt or truncated ({type(exc).__name__}: {show_value(str(exc))})") from None
     except OSError as exc:
         raise L3MVNError(f"{path} cannot be read ({exc.strerror or exc})") from None
     return data
@@ -114,25 +113,25 @@ def read_episodes(dataset: str | Path, split: str, scenes: dict[str, dict[int, S
 def _episode_from_record(path: Path, index: int, rec: object, floors: dict[int, SceneMap]) -> Episode:
     where = f"{path}: episode #{index}"
     if not isinstance(rec, dict):
-        raise L3MVNError(f"{where} is not an object, got {_show(rec)}")
+        raise L3MVNError(f"{where} is not an object, got {show_value(rec)}")
     for key in ("start_position", "start_rotation", "object_category"):
         if key not in rec:
             raise L3MVNError(f"{where} lacks {key!r}")
-    episode_id = _whole_number(where, "episode_id", rec.get("episode_id", index), 0, _ID_LIMIT)
+    episode_id = read_whole_number(where, "episode_id", rec.get("episode_id", index), 0, _ID_LIMIT)
     where = f"{where} (id {episode_id})"
     scene = _floor_of(where, rec, floors)
     _check_scene_id(where, path, rec, scene)
     goal = rec["object_category"]
     if not isinstance(goal, str) or goal not in GOAL_CATEGORIES:
-        raise L3MVNError(f"{where}: unknown category {_show(goal)}; valid: {', '.join(GOAL_CATEGORIES)}")
+        raise L3MVNError(f"{where}: unknown category {show_value(goal)}; valid: {', '.join(GOAL_CATEGORIES)}")
     return Episode(
         episode_id=episode_id,
         scene=scene.name,
         floor=scene.floor,
         start=_start_pose(where, scene, rec["start_position"], rec["start_rotation"]),
         goal=goal,
-        object_id=_whole_number(where, "object_id", rec.get("object_id", -1), -1, _ID_LIMIT),
-        geodesic_distance_m=_geodesic(where, rec.get("info")),
+        object_id=read_whole_number(where, "object_id", rec.get("object_id", -1), -1, _ID_LIMIT),
+        geodesic_distance_m=read_geodesic(where, rec.get("info")),
     )
 
 
@@ -142,7 +141,9 @@ def _floor_of(where: str, rec: dict, floors: dict[int, SceneMap]) -> SceneMap:
     raw = rec.get("floor_id", 0)
     floor = _as_whole(raw)
     if floor is None or floor not in floors:
-        raise L3MVNError(f"{where}: floor_id must be a floor of this scene (a whole number: {valid}), got {_show(raw)}")
+        raise L3MVNError(
+            f"{where}: floor_id must be a floor of this scene (a whole number: {valid}), got {show_value(raw)}"
+        )
     return floors[floor]
 
 
@@ -151,7 +152,7 @@ def _check_scene_id(where: str, path: Path, rec: dict, scene: SceneMap) -> None:
     scene_id = rec.get("scene_id", path.name[: -len("_episodes.json.gz")])
     if not isinstance(scene_id, str):
         raise L3MVNError(
-            f"{where}: scene_id must be a string such as 'gibson_semantic/{scene.name}.glb', got {_show(scene_id)}"
+            f"{where}: scene_id must be a string such as 'gibson_semantic/{scene.name}.glb', got {show_value(scene_id)}"
         )
     name = Path(scene_id).name.split(".")[0]
     if name != scene.name:
@@ -160,7 +161,7 @@ def _check_scene_id(where: str, path: Path, rec: dict, scene: SceneMap) -> None:
 
 def _start_pose(where: str, scene: SceneMap, position: object, rotation: object) -> Pose:
     """The start in our frame: 3 finite numbers on the map's navigable floor, a unit yaw quaternion."""
-    pos = _finite_numbers(where, "start_position", position, 3, "(p0, p1 up, p2)")
+    pos = read_finite_numbers(where, "start_position", position, 3, "(p0, p1 up, p2)")
     rot = yaw_quaternion(where, rotation)
     try:
         start = scene.pose_from_habitat(pos, rot)
@@ -168,7 +169,7 @@ def _start_pose(where: str, scene: SceneMap, position: object, rotation: object)
         raise L3MVNError(f"{where}: {exc}") from None
     if not scene.contains(start.x, start.y):
         raise L3MVNError(
-            f"{where}: start_position {_show(position)} lies outside the map of {scene.key}, "
+            f"{where}: start_position {show_value(position)} lies outside the map of {scene.key}, "
             f"which spans {scene.extent_text()}"
         )
     r, c = scene.cell_of(start.x, start.y)
@@ -181,11 +182,11 @@ def yaw_quaternion(where: str, value: object, order: str = "wxyz") -> list[float
     """(w, x, y, z) of a rotation about the up axis, normalised; see the tolerances above. ``order``
     is how the file writes it: our files (w, x, y, z), habitat's ObjectNav files (x, y, z, w)."""
     shown = "(w, x, y, z)" if order == "wxyz" else "(x, y, z, w)"
-    quat = _finite_numbers(where, "start_rotation", value, 4, shown)
+    quat = read_finite_numbers(where, "start_rotation", value, 4, shown)
     norm = math.sqrt(sum(v * v for v in quat))
     if not abs(norm - 1.0) <= ROTATION_NORM_TOLERANCE:
         raise L3MVNError(
-            f"{where}: start_rotation {_show(value)} must be a unit quaternion {shown}; its norm is {norm:.3g}"
+            f"{where}: start_rotation {show_value(value)} must be a unit quaternion {shown}; its norm is {norm:.3g}"
         )
     quat = [v / norm for v in quat]
     w, x, y, z = quat if order == "wxyz" else quat[3:] + quat[:3]
@@ -194,24 +195,26 @@ def yaw_quaternion(where: str, value: object, order: str = "wxyz") -> list[float
         hint = "; is the file in (x, y, z, w) order?" if order == "wxyz" else ""
         whose = "" if order == "wxyz" else "habitat's "
         raise L3MVNError(
-            f"{where}: start_rotation {_show(value)} must be a rotation about the up axis "
+            f"{where}: start_rotation {show_value(value)} must be a rotation about the up axis "
             f"({about_up} in {whose}{shown} order){hint}"
         )
     return [w, x, y, z]
 
 
-def _geodesic(where: str, info: object) -> float:
+def read_geodesic(where: str, info: object) -> float:
     """``info.geodesic_distance``: metres, or NaN when absent or null (files we wrote from such episodes)."""
     if info is None:
         return float("nan")
     if not isinstance(info, dict):
-        raise L3MVNError(f"{where}: info must be an object, got {_show(info)}")
+        raise L3MVNError(f"{where}: info must be an object, got {show_value(info)}")
     value = info.get("geodesic_distance")
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return float("nan")
     metres = _float_or_inf(value) if _is_number(value) else math.nan
     if not (math.isfinite(metres) and metres >= 0):
-        raise L3MVNError(f"{where}: info.geodesic_distance must be a finite number >= 0 (metres), got {_show(value)}")
+        raise L3MVNError(
+            f"{where}: info.geodesic_distance must be a finite number >= 0 (metres), got {show_value(value)}"
+        )
     return metres
 
 
@@ -229,22 +232,22 @@ def _as_whole(value: object) -> int | None:
     return value
 
 
-def _whole_number(where: str, key: str, value: object, low: int, high: int) -> int:
+def read_whole_number(where: str, key: str, value: object, low: int, high: int) -> int:
     """``value`` as an int in ``[low, high)``, or an error naming the field and the range."""
     whole = _as_whole(value)
     if whole is None or not low <= whole < high:
         top = "2**63 - 1" if high == _ID_LIMIT else high - 1
-        raise L3MVNError(f"{where}: {key} must be a whole number from {low} to {top}, got {_show(value)}")
+        raise L3MVNError(f"{where}: {key} must be a whole number from {low} to {top}, got {show_value(value)}")
     return whole
 
 
-def _finite_numbers(where: str, key: str, value: object, count: int, layout: str) -> list[float]:
+def read_finite_numbers(where: str, key: str, value: object, count: int, layout: str) -> list[float]:
     """Exactly ``count`` finite JSON numbers (a numeric string or an int beyond float range is an error)."""
     if not (isinstance(value, list) and len(value) == count and all(_is_number(v) for v in value)):
-        raise L3MVNError(f"{where}: {key} must be a list of {count} numbers {layout}, got {_show(value)}")
+        raise L3MVNError(f"{where}: {key} must be a list of {count} numbers {layout}, got {show_value(value)}")
     floats = [_float_or_inf(v) for v in value]
     if not all(math.isfinite(v) for v in floats):
-        raise L3MVNError(f"{where}: non-finite {key} {_show(value)}; it must be {count} finite numbers {layout}")
+        raise L3MVNError(f"{where}: non-finite {key} {show_value(value)}; it must be {count} finite numbers {layout}")
     return floats
 
 
@@ -254,11 +257,6 @@ def _float_or_inf(value: float) -> float:
         return float(value)
     except OverflowError:
         return math.inf
-
-
-def _show(value: object) -> str:
-    """A short one-line repr of a bad value for an error message (a whole list could be huge)."""
-    return reprlib.repr(value).replace("\n", " ")
 
 
 def episode_record(ep: Episode, scene: SceneMap) -> dict:

@@ -20,9 +20,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from l3mvn.core.errors import L3MVNError
+from l3mvn.core.errors import L3MVNError, show_value
 from l3mvn.core.writing import write_file
-from l3mvn.world.episodes import _finite_numbers, _geodesic, _show, _whole_number, read_json_gz, yaw_quaternion
+from l3mvn.world.episodes import (
+    read_finite_numbers,
+    read_geodesic,
+    read_json_gz,
+    read_whole_number,
+    yaw_quaternion,
+)
 from l3mvn.world.scenes.categories import goal_category
 
 # Our goal category -> HM3D's episode name (the inverse of categories.GOAL_NAMES for HM3D's six); the
@@ -122,7 +128,7 @@ def read_split(dataset: str | Path, split: str) -> SplitFiles:
     if first is None:
         raise L3MVNError(f"{Path(dataset) / split} holds no episodes (in {paths[0].name} or content/*.json.gz)")
     if not isinstance(first, dict) or not isinstance(first.get("scene_id"), str):
-        raise L3MVNError(f"{paths[0].parent}: episodes must be objects with a scene_id string, got {_show(first)}")
+        raise L3MVNError(f"{paths[0].parent}: episodes must be objects with a scene_id string, got {show_value(first)}")
     return SplitFiles(files, first["scene_id"])
 
 
@@ -135,7 +141,7 @@ def read_scenes(split: SplitFiles) -> dict[str, SceneRecords]:
         for index, rec in enumerate(file.episodes):
             if not isinstance(rec, dict) or not isinstance(rec.get("scene_id"), str):
                 raise L3MVNError(
-                    f"{file.path}: episode #{index} must be an object with a scene_id string, got {_show(rec)}"
+                    f"{file.path}: episode #{index} must be an object with a scene_id string, got {show_value(rec)}"
                 )
             entries.setdefault(rec["scene_id"], []).append((file.path, index, rec))
         for key, value in file.goals.items():
@@ -176,7 +182,7 @@ def _read_file(path: Path) -> EpisodeFile:
         raise L3MVNError(f'{path}: expected an object with an "episodes" list')
     goals = data.get("goals_by_category", {})
     if not isinstance(goals, dict):
-        raise L3MVNError(f"{path}: goals_by_category must be an object, got {_show(goals)}")
+        raise L3MVNError(f"{path}: goals_by_category must be an object, got {show_value(goals)}")
     return EpisodeFile(path, data.get("episodes", []), goals)
 
 
@@ -192,7 +198,7 @@ def _episodes(scene_id: str, entries: list[tuple[Path, int, dict]]) -> tuple[tup
         raw_id = rec.get("episode_id", index)
         if isinstance(raw_id, str) and raw_id.strip().isdigit():  # habitat writes ids as strings
             raw_id = int(raw_id)
-        episode_id = _whole_number(where, "episode_id", raw_id, 0, _ID_LIMIT)
+        episode_id = read_whole_number(where, "episode_id", raw_id, 0, _ID_LIMIT)
         if episode_id in seen:
             raise L3MVNError(
                 f"{where}: episode_id {episode_id} repeats {seen[episode_id]} of scene "
@@ -200,14 +206,14 @@ def _episodes(scene_id: str, entries: list[tuple[Path, int, dict]]) -> tuple[tup
             )
         seen[episode_id] = where
         where = f"{where} (id {episode_id})"
-        x, y, z = _finite_numbers(where, "start_position", rec["start_position"], 3, _AXES)
+        x, y, z = read_finite_numbers(where, "start_position", rec["start_position"], 3, _AXES)
         w, qx, qy, qz = yaw_quaternion(where, rec["start_rotation"], order="xyzw")
         goal = goal_category(rec["object_category"], where)
         out.append(
             (
                 where,
                 EpisodeRecord(
-                    episode_id, scene_id, (x, y, z), (w, qx, qy, qz), goal, _geodesic(where, rec.get("info"))
+                    episode_id, scene_id, (x, y, z), (w, qx, qy, qz), goal, read_geodesic(where, rec.get("info"))
                 ),
             )
         )
@@ -228,27 +234,27 @@ def _goals(scene_id: str, goals: dict[str, list[tuple[Path, object]]]) -> tuple[
         for path, value in found:
             where = f"{path}: goals_by_category[{key!r}]"
             if not isinstance(value, list):
-                raise L3MVNError(f"{where} must be a list of goals, got {_show(value)}")
+                raise L3MVNError(f"{where} must be a list of goals, got {show_value(value)}")
             out += [_goal(f"{where}[{i}]", goal) for i, goal in enumerate(value)]
     return tuple(out)
 
 
 def _goal(where: str, goal: object) -> GoalRecord:
     if not isinstance(goal, dict):
-        raise L3MVNError(f"{where} must be an object, got {_show(goal)}")
+        raise L3MVNError(f"{where} must be an object, got {show_value(goal)}")
     category = goal_category(goal.get("object_category"), where)
-    object_id = _whole_number(where, "object_id", goal.get("object_id"), 0, _ID_LIMIT)
+    object_id = read_whole_number(where, "object_id", goal.get("object_id"), 0, _ID_LIMIT)
     views = goal.get("view_points", [])
     if not isinstance(views, list):
-        raise L3MVNError(f"{where}: view_points must be a list, got {_show(views)}")
+        raise L3MVNError(f"{where}: view_points must be a list, got {show_value(views)}")
     return GoalRecord(object_id, category, tuple(_view(f"{where}: view_points[{j}]", v) for j, v in enumerate(views)))
 
 
 def _view(where: str, view: object) -> Vec3:
     state = view.get("agent_state") if isinstance(view, dict) else None
     if not isinstance(state, dict):
-        raise L3MVNError(f"{where} must hold an agent_state object, got {_show(view)}")
-    x, y, z = _finite_numbers(where, "agent_state.position", state.get("position"), 3, _AXES)
+        raise L3MVNError(f"{where} must hold an agent_state object, got {show_value(view)}")
+    x, y, z = read_finite_numbers(where, "agent_state.position", state.get("position"), 3, _AXES)
     return (x, y, z)
 
 

@@ -7,13 +7,12 @@ from __future__ import annotations
 
 import bz2
 import pickle
-import reprlib
 from pathlib import Path
 
 import numpy as np
 
 from l3mvn.core.categories import GIBSON_CATEGORIES
-from l3mvn.core.errors import L3MVNError
+from l3mvn.core.errors import L3MVNError, show_value
 from l3mvn.core.paths import plain_name
 from l3mvn.core.writing import write_file
 from l3mvn.world.scenes.map_pickle import load_map_pickle
@@ -59,13 +58,6 @@ def info_path(dataset: str | Path, split: str) -> Path:
     return path
 
 
-def _show(value: object) -> str:
-    """A bad value in an error message: short, and on one line (numpy reprs span several)."""
-    if isinstance(value, np.ndarray):
-        return f"an array of shape {value.shape} and dtype {value.dtype}"
-    return reprlib.repr(value).replace("\n", " ")
-
-
 def read_info(path: Path) -> object:
     """The raw ``{scene: {floor: record}}`` of a ``.pbz2`` file, read without executing anything."""
     try:
@@ -86,7 +78,7 @@ def read_info(path: Path) -> object:
         RecursionError,
         MemoryError,
     ) as exc:
-        raise L3MVNError(f"{path} is corrupt or truncated ({type(exc).__name__}: {_show(str(exc))})") from None
+        raise L3MVNError(f"{path} is corrupt or truncated ({type(exc).__name__}: {show_value(str(exc))})") from None
 
 
 def load_split(dataset: str | Path, split: str, **scene_kwargs) -> dict[str, dict[int, SceneMap]]:
@@ -116,7 +108,7 @@ def _scene_name(path: Path, key: object) -> str:
 def _floor_id(path: Path, name: str, key: object) -> int:
     """Floor keys are whole numbers (``floor_id`` in episode files refers to them)."""
     if isinstance(key, (bool, np.bool_)) or not isinstance(key, (int, np.integer)):
-        raise L3MVNError(f"{path}: scene {name}: floor keys must be whole numbers such as 0, got {_show(key)}")
+        raise L3MVNError(f"{path}: scene {name}: floor keys must be whole numbers such as 0, got {show_value(key)}")
     return int(key)
 
 
@@ -149,13 +141,13 @@ def _floor_from_record(path: Path, name: str, floor: int, rec: object, scene_kwa
     if origin.shape != (2,) or not (np.abs(origin) <= MAX_COORDINATE_M * 100).all():
         raise L3MVNError(
             f"{where}: origin must be two finite numbers (ox_cm, oy_cm) within "
-            f"{MAX_COORDINATE_M * 100:.0e} cm, got {_show(rec['origin'])}"
+            f"{MAX_COORDINATE_M * 100:.0e} cm, got {show_value(rec['origin'])}"
         )
     height = _numeric_array(where, "floor_height", rec["floor_height"])
     if height.shape != () or not abs(float(height)) <= MAX_COORDINATE_M:
         raise L3MVNError(
             f"{where}: floor_height must be one finite number within {MAX_COORDINATE_M:.0e} m, "
-            f"got {_show(rec['floor_height'])}"
+            f"got {show_value(rec['floor_height'])}"
         )
     cats = GIBSON_CATEGORIES[: sem.shape[0] - 1]
     try:
@@ -197,7 +189,7 @@ def _numeric_array(where: str, key: str, value: object) -> np.ndarray:
         arr = np.asarray(None)
     allowed = "biuf" if key == "sem_map" else "iuf"
     if arr.dtype.kind not in allowed:
-        raise L3MVNError(f"{where}: {key} must be numeric, got {_show(value)} ({type(value).__name__})")
+        raise L3MVNError(f"{where}: {key} must be numeric, got {show_value(value)} ({type(value).__name__})")
     return arr
 
 
