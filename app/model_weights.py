@@ -11,8 +11,10 @@ import inspect
 from pathlib import Path
 
 from l3mvn.agent.language import scorer_names
+from l3mvn.agent.language.llm import llm_problem
 from l3mvn.agent.language.models import resolve
 from l3mvn.agent.language.scorers import Scorer
+from l3mvn.core.config.policy import LLM_SCORER
 from l3mvn.core.errors import L3MVNError
 
 
@@ -24,7 +26,7 @@ def scorer_problems() -> dict[str, str]:
         name = getattr(cls, "name", "")
         model = _default_model(cls)
         if name in names and model is not None:
-            problem = model_problem(model)
+            problem = llm_problem(model) if name == LLM_SCORER else model_problem(model)
             if problem is not None:
                 problems[name] = problem
     return dict(sorted(problems.items()))

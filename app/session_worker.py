@@ -37,6 +37,7 @@ from l3mvn.run.registry import (
     names_where,
     reads_language,
     scorer_of,
+    with_scorer,
 )
 from l3mvn.run.runner import Runner
 from l3mvn.run.session import EpisodeSession, Steerable
@@ -439,11 +440,12 @@ class DashboardController:
         policy, and the Head only where that scorer reads one (a head elsewhere is refused or ignored)."""
         scorer = self._scorer_of(policy)
         p = self.cfg.policy
-        return self.cfg.replace(
+        chosen = self.cfg.replace(
             policy=replace(
                 p, scorer=scorer if self.scorer else p.scorer, head=p.head if scorer == HEAD_SCORER else None
             )
         )
+        return with_scorer(policy, chosen)  # as `l3mvn eval` hashes it: the scorer in force written in
 
     def _runner_fits(self, cfg: Config, policy: str) -> bool:
         """Whether the warm runner builds ``policy`` as ``cfg`` says: its policies are cached by name, so

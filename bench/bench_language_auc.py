@@ -7,6 +7,8 @@ on few rooms. Reference line: a Bernoulli naive Bayes fitted on the ``train`` bu
 
     python bench/bench_language_auc.py                       # offline scorers, both object filters
     python bench/bench_language_auc.py --scorers mlm causal --mlm-model /path/roberta-large
+    python bench/bench_language_auc.py --scorers llm --filters entropy --llm-models smollm2-135m gemma3-270m \
+        --llm-prompts paper contrastive
 """
 
 from __future__ import annotations
@@ -82,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--filters", nargs="+", default=["entropy", "all"], choices=["entropy", "all"])
     ap.add_argument("--mlm-model", default="roberta-large")
     ap.add_argument("--causal-model", default="gpt2-large")
+    ap.add_argument("--llm-models", nargs="+", default=["smollm2-135m"], help="llm scorer: models to compare")
+    ap.add_argument("--llm-prompts", nargs="+", default=["paper"], help="llm scorer: prompts to compare")
     ap.add_argument("--split", default="test", choices=["val", "test"])
     args = ap.parse_args(argv)
 
@@ -102,26 +106,32 @@ def main(argv: list[str] | None = None) -> int:
                 auc(naive_bayes_scores(train, vocab, g, s), y) for g, (s, y) in cases.items()
             ]
     timings = {}
+    variants = []
     for name in args.scorers:
+        if name == "llm":
+            variants += [
+                (f"llm {m} {p}", name, {"model": m, "prompt": p}) for m in args.llm_models for p in args.llm_prompts
+            ]
+        else:
+            variants.append((name, name, {}))
+    for label, name, extra in variants:
         for filt in args.filters:
-            options = {"object_filter": filt}
+            options = {"object_filter": filt, **extra}
             if name == "mlm":
                 options["model"] = args.mlm_model
             if name == "causal":
                 options["model"] = args.causal_model
-            if (
-                name == "feedforward"
-            ):  # room membership is what the room-list head predicts; the frontier head predicts metres
+            if name == "feedforward":  # room membership is what the room-list head predicts
                 options["head"] = "rooms"
             try:
                 scorer = make_scorer(name, **options)
             except L3MVNError as exc:
-                print(f"skipped {name}: {exc}")
+                print(f"skipped {label}: {exc}")
                 break
-            rows[f"{name} ({filt})"] = [auc(scorer.score_goal(s, g), y) for g, (s, y) in cases.items()]
+            rows[f"{label} ({filt})"] = [auc(scorer.score_goal(s, g), y) for g, (s, y) in cases.items()]
             if filt == "entropy":
                 sets = [s for s in cases["chair"][0] if scorer.query_objects(s)]
-                timings[name] = timing(scorer, sets)
+                timings[label] = timing(scorer, sets)
     print(table(rows, counts))
     if timings:
         print("\n| scorer | ms / 8 frontiers x 6 goals, cold | cached |\n|---|---|---|")

@@ -13,6 +13,7 @@ from conftest import serve_dashboard
 from l3mvn.core.config import Config, PolicyConfig, SimConfig, config_hash
 from l3mvn.core.config.policy import HEAD_KINDS
 from l3mvn.core.errors import L3MVNError
+from l3mvn.run.registry import scorer_of, with_scorer
 from l3mvn.world.datasets import load_episode_set
 from l3mvn_studio.session_worker import DEFAULT_HEAD_CHOICE, DashboardController
 
@@ -43,7 +44,8 @@ def _reset(c: DashboardController):
 
 
 def _hash(cfg: Config, policy: str) -> str:
-    return config_hash(cfg, policy, 0)
+    """The hash `l3mvn eval` writes for ``policy`` under ``cfg`` (its scorer in force written in)."""
+    return config_hash(with_scorer(policy, cfg), policy, 0)
 
 
 def _with_head(head: str | None) -> Config:
@@ -80,10 +82,11 @@ def test_the_head_survives_a_policy_change_and_policies_that_ignore_it_say_so_an
     ctl.set_head("rooms-bag")
     ctl.set_policy("l3mvn-zs")
     ctl.set_head("rooms-bag")  # picked again under a policy that does not read it
-    assert "ignored by policy 'l3mvn-zs', which scores with 'roomtype'" in ctl.notices[-1].text
+    zero_shot = scorer_of("l3mvn-zs", ctl.cfg.policy)  # the LLM where one is installed, else room types
+    assert f"ignored by policy 'l3mvn-zs', which scores with {zero_shot!r}" in ctl.notices[-1].text
     assert "only feed-forward scoring uses a head (policies l3mvn-ff, near+llm" in ctl.notices[-1].text
-    zs = _reset(ctl)  # a head handed to the room-type scorer would be refused: it is left out instead
-    assert zs.policy.global_policy.scorer_name == "roomtype" and zs.policy.global_policy.head is None
+    zs = _reset(ctl)  # a head handed to another scorer would be refused: it is left out instead
+    assert zs.policy.global_policy.scorer_name == zero_shot and zs.policy.global_policy.head is None
     assert zs.config_hash == _hash(_with_head(None), "l3mvn-zs")
 
     ctl.set_policy("oracle")

@@ -429,12 +429,15 @@ def test_habitat_keeps_the_passages_our_grid_keeps(tmp_path):
     assert all(0.95 < r < 1.05 for r in ratios.values()), ratios
 
 
-@pytest.mark.parametrize(("op", "request_", "message"), [
-    ("op_reset", {"rotation": [1, 0, 0, 0]}, "position must be three numbers"),
-    ("op_reset", {"position": [1, 0, 1], "rotation": "north"}, "rotation must be a (w, x, y, z) quaternion"),
-    ("op_reset", {"position": [1, 0, float("nan")], "rotation": [1, 0, 0, 0]}, "position must be finite"),
-    ("op_geodesic", {"start": "123", "goals": [[1, 0, 1]]}, "a point must be three numbers"),
-])
+@pytest.mark.parametrize(
+    ("op", "request_", "message"),
+    [
+        ("op_reset", {"rotation": [1, 0, 0, 0]}, "position must be three numbers"),
+        ("op_reset", {"position": [1, 0, 1], "rotation": "north"}, "rotation must be a (w, x, y, z) quaternion"),
+        ("op_reset", {"position": [1, 0, float("nan")], "rotation": [1, 0, 0, 0]}, "position must be finite"),
+        ("op_geodesic", {"start": "123", "goals": [[1, 0, 1]]}, "a point must be three numbers"),
+    ],
+)
 def test_the_builtin_server_refuses_a_malformed_request_in_one_line(op, request_, message):
     from l3mvn.world.sim.builtin_server import BuiltinBackend
 

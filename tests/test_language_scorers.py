@@ -21,8 +21,8 @@ def scorers():
 
 
 def test_registry_names_every_scorer():
-    assert scorer_names() == ("causal", "embedding", "feedforward", "mlm", "roomtype")
-    with pytest.raises(L3MVNError, match="valid: causal, embedding, feedforward, mlm, roomtype"):
+    assert scorer_names() == ("causal", "embedding", "feedforward", "llm", "mlm", "roomtype")
+    with pytest.raises(L3MVNError, match="valid: causal, embedding, feedforward, llm, mlm, roomtype"):
         make_scorer("gpt5")
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from l3mvn.core.config import SUCCESS_RULES, Config, PolicyConfig, TaskConfig, config_dict, config_hash, override
-from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS, SELECTIONS
+from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS, LLM_PROMPTS, SELECTIONS
 from l3mvn.core.config.sim import BACKENDS
 from l3mvn.core.config.task import VIEW_POINT_RULES
 from l3mvn.core.errors import L3MVNError, one_line
@@ -187,6 +187,20 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
         f"-bag: the same on a bag of objects, without the language model (default {DEFAULT_HEAD})",
     )
     ev.add_argument(
+        "--llm",
+        default=PolicyConfig.llm,
+        metavar="MODEL",
+        help=f"scorer llm: a named model (`l3mvn language models` lists them) or a .gguf file "
+        f"(default {PolicyConfig.llm})",
+    )
+    ev.add_argument(
+        "--prompt",
+        choices=LLM_PROMPTS,
+        default=PolicyConfig.llm_prompt,
+        help="scorer llm: the paper's query scored by log p(W), or the contrastive prompt (worked examples, "
+        "the goal's own prior subtracted)",
+    )
+    ev.add_argument(
         "--seg-noise",
         type=float,
         default=0.0,
@@ -215,6 +229,14 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
         default=None,
         help="also write an MP4 per episode here, named by outcome (implies --record)",
     )
+
+    cr = sub.add_parser(
+        "compare-results",
+        help="two result files on the same episodes: per-episode differences in SR and SPL with 95%% intervals",
+    )
+    cr.add_argument("a", help="result file A (.jsonl)")
+    cr.add_argument("b", help="result file B (.jsonl): differences are B - A")
+    cr.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
 
     sc = sub.add_parser("scenes", help="list the scenes and floors of a dataset split, or audit them")
     sc.add_argument(
@@ -257,6 +279,7 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     lang_sub = lang.add_subparsers(dest="language_command", required=True)
     st = lang_sub.add_parser("stats", help="print p(goal | object), entropy and the informative list")
     st.add_argument("--min-rooms", type=_positive, default=1, help="hide objects seen in fewer rooms")
+    lang_sub.add_parser("models", help="the LLMs the llm scorer can load: installed or not, license, source")
     bs = lang_sub.add_parser("build-stats", help="recompute the shipped co-occurrence JSON from room data")
     bs.add_argument("--gibson-rooms", default=None, help="gibson_3dsg_rooms.jsonl (default: ../shared when present)")
     bs.add_argument("--out", default=None, help="where to write (default: the shipped file)")
@@ -312,6 +335,11 @@ def main(argv: list[str] | None = None, extra: dict[str, Command] | None = None)
             return commands[args.command].run(args)
         if args.command == "eval":
             return _cmd_eval(args)
+        if args.command == "compare-results":
+            from l3mvn.run.eval.paired import compare_results, format_pairing
+
+            print(format_pairing(compare_results(args.a, args.b, seed=args.seed)))
+            return 0
         if args.command == "scenes":
             return _cmd_audit(args) if args.action == "audit" else _cmd_scenes(args)
         if args.command == "episodes":
@@ -487,6 +515,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
     from l3mvn.run.eval.job import EvalJob
     from l3mvn.run.eval.metrics import format_summary, summarize
     from l3mvn.run.eval.results import check_resumable
+    from l3mvn.run.registry import scorer_choice
 
     if args.address and args.backend != "ray":
         raise L3MVNError("--address joins a Ray cluster: add --backend ray")
@@ -496,7 +525,15 @@ def _cmd_eval(args: argparse.Namespace) -> int:
         if args.scorer not in scorer_names():
             raise L3MVNError(f"unknown scorer {args.scorer!r}; valid scorers: {', '.join(scorer_names())}")
     cfg = _config(
-        args, PolicyConfig(scorer=args.scorer, selection=args.selection, seg_noise=args.seg_noise, head=args.head)
+        args,
+        PolicyConfig(
+            scorer=args.scorer,
+            selection=args.selection,
+            seg_noise=args.seg_noise,
+            head=args.head,
+            llm=args.llm,
+            llm_prompt=args.prompt,
+        ),
     )
     if cfg.sim.backend == "habitat" and args.scenes is None:
         raise L3MVNError(
@@ -504,6 +541,8 @@ def _cmd_eval(args: argparse.Namespace) -> int:
             "with its scan root (`l3mvn export-hm3d` writes one from a procedural house)"
         )
     check_resumable(args.out, args.resume)
+    if fallback := scorer_choice(args.policy, cfg.policy)[1]:
+        print(f"note: {fallback}", file=sys.stderr)
     job = EvalJob.create(
         args.dataset,
         args.split,
@@ -573,6 +612,17 @@ def _cmd_language(args: argparse.Namespace) -> int:
         from l3mvn.run.eval.frontier_data import run
 
         return run(args)
+    if args.language_command == "models":
+        from l3mvn.agent.language.llm import LLM_MODELS, llm_problem
+
+        for name, source in LLM_MODELS.items():
+            problem = llm_problem(name)
+            state = "installed" if problem is None else f"not installed: {source.pip}"
+            print(
+                f"{name}: {state}; license {source.license}; source {source.source}; "
+                f"card l3mvn/data/models/{source.card}"
+            )
+        return 0
     kwargs = {"gibson_rooms": args.gibson_rooms}
     if args.out:
         kwargs["out"] = args.out

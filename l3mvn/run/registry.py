@@ -18,6 +18,7 @@ spec marked ``ground_truth`` is handed the environment and the task.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
@@ -28,6 +29,7 @@ from l3mvn.agent.policies.global_policies import CostUtility, GlobalPolicy, Near
 from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
 from l3mvn.agent.policies.oracle_frontier import FrontierOracle
 from l3mvn.core.config import Config, PolicyConfig
+from l3mvn.core.config.policy import LLM_SCORER
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.plugins import discover
 from l3mvn.run.session import Policy
@@ -53,11 +55,13 @@ class PolicyContext:
 @dataclass(frozen=True)
 class Language:
     """A language policy's defaults: the scorer it reads, the exploration score it fuses with, and
-    the paradigm of the paper it follows (zero-shot or feed-forward)."""
+    the paradigm of the paper it follows (zero-shot or feed-forward); ``fallback``: the scorer it reads
+    instead where its own cannot load (no LLM installed), said in a notice."""
 
     scorer: str
     exploration: str
     paradigm: str
+    fallback: str | None = None
 
 
 @dataclass(frozen=True)
@@ -90,13 +94,14 @@ def _language(name: str, language: Language) -> Callable[[PolicyContext], Policy
         p = ctx.config.policy
         return LanguageFrontierPolicy(
             name,
-            p.scorer or language.scorer,
+            scorer_of(name, p) or language.scorer,
             language.exploration,
             p.selection,
             language.paradigm,
             (p.bound_low, p.bound_high),
             p.head,
             ctx.config.frontiers.cu_lambda,
+            (p.llm, p.llm_prompt),
         )
 
     return _map_agent(policy)
@@ -122,7 +127,7 @@ def _teleop(ctx: PolicyContext) -> Policy:
     return TeleopAgent(CostUtility(), ctx.categories, ctx.config, ctx.seed)
 
 
-_ZERO_SHOT = Language("roomtype", "cost-utility", "zero-shot")
+_ZERO_SHOT = Language(LLM_SCORER, "cost-utility", "zero-shot", fallback="roomtype")
 _FEED_FORWARD = Language("feedforward", "cost-utility", "feedforward")
 _NEAR_FEED_FORWARD = Language("feedforward", "nearest", "feedforward")
 
@@ -252,11 +257,39 @@ def language_policies() -> tuple[str, ...]:
     return names_where(lambda spec: spec.language is not None and spec.same_as is None)
 
 
-def scorer_of(name: str, options: PolicyConfig) -> str | None:
-    """The language scorer a policy ``name`` built with ``options`` scores with: ``--scorer`` when given,
-    else the policy's own default; None for a policy that reads no language model."""
+def scorer_choice(name: str, options: PolicyConfig) -> tuple[str | None, str | None]:
+    """The language scorer a policy ``name`` built with ``options`` reads (``--scorer`` when given, else
+    the policy's own, else its fallback where its own cannot load here), and why it is the fallback
+    (None when it is not); (None, None) for a policy that reads no language model."""
     language = policy_spec(name).language
-    return None if language is None else options.scorer or language.scorer
+    if language is None:
+        return None, None
+    if options.scorer is not None:
+        return options.scorer, None
+    problem = None
+    if language.scorer == LLM_SCORER:
+        from l3mvn.agent.language.llm import llm_problem  # the language package loads torch: only here
+
+        problem = llm_problem(options.llm)
+    if problem is not None and options.llm != PolicyConfig.llm:  # a model asked for by name: no fallback
+        raise L3MVNError(problem)
+    if problem is None or language.fallback is None:
+        return language.scorer, None
+    return language.fallback, (f"policy {name!r} scores with {language.fallback!r} instead of an LLM: {problem}")
+
+
+def scorer_of(name: str, options: PolicyConfig) -> str | None:
+    """The language scorer a policy ``name`` built with ``options`` reads (``scorer_choice``)."""
+    return scorer_choice(name, options)[0]
+
+
+def with_scorer(name: str, config: Config) -> Config:
+    """``config`` with the scorer a language policy will read written into its policy section, so the
+    hash and every result line name it (what the policy falls back to depends on what is installed)."""
+    scorer = scorer_of(name, config.policy)
+    if scorer is None or config.policy.scorer == scorer:
+        return config
+    return dataclasses.replace(config, policy=dataclasses.replace(config.policy, scorer=scorer))
 
 
 def check_policy(name: str) -> str:
@@ -270,6 +303,12 @@ def check_options(name: str, options: PolicyConfig) -> None:
     if spec.language is None and (options.scorer is not None or options.selection != "paper"):
         language = ", ".join(n for n, s in _registry()[0].items() if s.language is not None)
         raise L3MVNError(f"--scorer and --selection apply to language policies only ({language}), not {name!r}")
+    llm_settings = (options.llm, options.llm_prompt) != (PolicyConfig.llm, PolicyConfig.llm_prompt)
+    if llm_settings and scorer_of(name, options) != LLM_SCORER:
+        raise L3MVNError(
+            f"--llm and --prompt apply to the {LLM_SCORER} scorer only; policy {name!r} scores with "
+            f"{scorer_of(name, options) or 'no language model'} (add --scorer {LLM_SCORER})"
+        )
     if not spec.map_based and options.seg_noise:
         raise L3MVNError(f"--seg-noise applies to map-based policies; {name!r} does not read the semantic frames")
 

@@ -40,6 +40,7 @@ class Fusion:
     cost_m: tuple[float, ...] = ()  # expected: travel cost to each frontier
     bonus_m: tuple[float, ...] = ()  # expected: size bonus U / lambda
     expected_m: tuple[float, ...] = ()  # expected: the head's metres on from each frontier to the goal
+    scorer: str = ""  # what gave the S_LLM scores: the scorer, and its model where it has one
 
     @property
     def max_s_llm(self) -> float:

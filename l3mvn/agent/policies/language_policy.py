@@ -35,7 +35,7 @@ from l3mvn.agent.frontiers import Frontier, Fusion
 from l3mvn.agent.mapping import SemanticMap
 from l3mvn.agent.policies.global_policies import LanguageScore, Selection
 from l3mvn.core.config import SELECTIONS, FrontierConfig, PolicyConfig
-from l3mvn.core.config.policy import HEAD_SCORER
+from l3mvn.core.config.policy import HEAD_SCORER, LLM_SCORER
 from l3mvn.core.errors import L3MVNError
 
 if TYPE_CHECKING:  # the language package loads its models' libraries: only on first use
@@ -57,21 +57,25 @@ def _predicts_distance(scorer: Scorer) -> TypeGuard[_DistanceScorer]:
     return bool(getattr(scorer, "predicts_distance", False))
 
 
-def shared_scorer(name: str, head: str | None = None) -> Scorer:
-    """One scorer per process, name and head: models load once and the (object set, goal) cache is
-    shared across episodes, where the same object sets keep recurring."""
-    return _shared_scorer(name, head)
+def shared_scorer(name: str, head: str | None = None, llm: tuple[str, str] | None = None) -> Scorer:
+    """One scorer per process, name and options: models load once and the (object set, goal) cache is
+    shared across episodes, where the same object sets keep recurring. ``head`` applies to the
+    feed-forward scorer only, ``llm`` (model, prompt) to the llm scorer only."""
+    if head is not None and name != HEAD_SCORER:
+        raise L3MVNError(f"a head ({head!r}) applies to the {HEAD_SCORER} scorer only, not {name!r}")
+    options: tuple[tuple[str, str], ...] = ()
+    if head is not None:
+        options = (("head", head),)
+    elif name == LLM_SCORER and llm is not None:
+        options = (("model", llm[0]), ("prompt", llm[1]))
+    return _shared_scorer(name, options)
 
 
 @lru_cache(maxsize=4)
-def _shared_scorer(name: str, head: str | None) -> Scorer:
+def _shared_scorer(name: str, options: tuple[tuple[str, str], ...]) -> Scorer:
     from l3mvn.agent.language import make_scorer
 
-    if head is None:
-        return make_scorer(name)
-    if name != HEAD_SCORER:
-        raise L3MVNError(f"a head ({head!r}) applies to the {HEAD_SCORER} scorer only, not {name!r}")
-    return make_scorer(name, head=head)
+    return make_scorer(name, **dict(options))
 
 
 class LanguageFrontierPolicy:
@@ -87,6 +91,7 @@ class LanguageFrontierPolicy:
         bound: tuple[float, float] = (PolicyConfig.bound_low, PolicyConfig.bound_high),
         head: str | None = None,
         cu_lambda: float = FrontierConfig.cu_lambda,
+        llm: tuple[str, str] = (PolicyConfig.llm, PolicyConfig.llm_prompt),
     ) -> None:
         if selection not in SELECTIONS:
             raise L3MVNError(f"unknown selection {selection!r}; valid: {', '.join(SELECTIONS)}")
@@ -100,11 +105,11 @@ class LanguageFrontierPolicy:
             raise L3MVNError(
                 f"selection 'expected' needs frontiers.cu_lambda > 0 (cost-utility in metres), got {cu_lambda}"
             )
-        self.bound, self.head, self.cu_lambda = bound, head, cu_lambda
+        self.bound, self.head, self.cu_lambda, self.llm = bound, head, cu_lambda, llm
         self.scorer = self._make(scorer)
 
     def _make(self, scorer: str) -> Scorer:
-        made = shared_scorer(scorer, self.head if scorer == HEAD_SCORER else None)
+        made = shared_scorer(scorer, self.head if scorer == HEAD_SCORER else None, self.llm)
         if self.selection == "expected" and not getattr(made, "predicts_distance", False):
             raise L3MVNError(
                 f"selection 'expected' needs a scorer that predicts distances (feedforward with "
@@ -176,6 +181,7 @@ class LanguageFrontierPolicy:
             explore=tuple(map(float, explore)),
             compared=tuple(map(float, compared)),
             exploration=self.exploration,
+            scorer=self.scorer.label,
             **numbers,
         )
 

@@ -1,4 +1,4 @@
-"""Settings that change what a named policy does (``--scorer``, ``--selection``, ``--seg-noise``)."""
+"""Settings that change what a named policy does (``--scorer``, ``--selection``, ``--seg-noise``, ``--llm``)."""
 
 from __future__ import annotations
 
@@ -20,6 +20,10 @@ SELECTIONS = ("paper", "official_code", "expected")
 HEAD_KINDS = ("frontiers", "rooms", "frontiers-bag", "rooms-bag")
 DEFAULT_HEAD = "rooms"
 HEAD_SCORER = "feedforward"  # the one language scorer that reads a head
+# The generative LM behind the ``llm`` scorer (l3mvn.agent.language.llm): a named model or a .gguf
+# path, and the prompt it reads (l3mvn.agent.language.scorers.llm).
+LLM_SCORER = "llm"
+LLM_PROMPTS = ("paper", "contrastive")
 
 
 @dataclass(frozen=True)
@@ -32,6 +36,8 @@ class PolicyConfig:
     bound_high: float = 0.30
     seg_noise: float = 0.0  # map-based policies: perception errors (see l3mvn.agent.perception)
     head: str | None = None  # feed-forward scorer: a head kind instead of DEFAULT_HEAD
+    llm: str = "smollm2-135m"  # the llm scorer's model: a named model or a .gguf file
+    llm_prompt: str = "contrastive"  # ... and its prompt (LLM_PROMPTS; the one that ranked best offline)
 
     def __post_init__(self) -> None:
         if self.selection not in SELECTIONS:
@@ -42,5 +48,9 @@ class PolicyConfig:
             raise L3MVNError(
                 f"the bound must satisfy 0 <= bound_low < bound_high <= 1, got {self.bound_low}, {self.bound_high}"
             )
+        if self.llm_prompt not in LLM_PROMPTS:
+            raise L3MVNError(f"unknown LLM prompt {self.llm_prompt!r}; valid: {', '.join(LLM_PROMPTS)}")
+        if not self.llm.strip():
+            raise L3MVNError("policy.llm must name an LLM (smollm2-135m, gemma3-270m) or a .gguf file")
         if not (math.isfinite(self.seg_noise) and 0.0 <= self.seg_noise <= 1.0):
             raise L3MVNError(f"seg_noise must lie in [0, 1], got {self.seg_noise}")

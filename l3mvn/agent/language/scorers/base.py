@@ -59,6 +59,11 @@ class Scorer(ABC):
         self._misses = 0
 
     # --- public ---------------------------------------------------------------------------------
+    @property
+    def label(self) -> str:
+        """What scores, for people: the scorer's name, and its model where it has one."""
+        return self.name
+
     def query_objects(self, objects: Iterable[str]) -> ObjectKey:
         """The objects a query about this frontier names, in query order."""
         if self.object_filter == "entropy":
@@ -150,7 +155,7 @@ def make_scorer(name: str, **options: Any) -> Scorer:
 
 
 def _built_in() -> dict[str, Callable[..., Scorer]]:
-    from l3mvn.agent.language.scorers import causal, embedding, feedforward, mlm  # noqa: F401  (registers)
+    from l3mvn.agent.language.scorers import causal, embedding, feedforward, llm, mlm  # noqa: F401  (registers)
 
     return _REGISTRY
 

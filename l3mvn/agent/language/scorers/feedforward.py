@@ -47,6 +47,10 @@ class FeedForwardScorer(Scorer):
     temperature = 1.0
     distance_temperature_m = 1.0
 
+    @property
+    def label(self) -> str:
+        return f"{self.name} ({self.kind} head)"
+
     def __init__(self, model: str = MINILM, head: str | Path | None = None, **kw: Any) -> None:
         super().__init__(**kw)
         head = DEFAULT_HEAD if head is None else head
