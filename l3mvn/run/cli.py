@@ -238,6 +238,29 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     cr.add_argument("b", help="result file B (.jsonl): differences are B - A")
     cr.add_argument("--seed", type=int, default=0, help="seed of the bootstrap (default 0)")
 
+    tb = sub.add_parser(
+        "table", help="the paper's Table I (paper-1) or Table II (paper-2): every row we have, run, beside the paper's"
+    )
+    tb.add_argument("name", choices=["paper-1", "paper-2"])
+    _add_source_args(tb)
+    _add_sim_args(tb)
+    tb.add_argument(
+        "--results",
+        default="results/tables",
+        metavar="DIR",
+        help="one result file per row here, resumed by a second call (default results/tables)",
+    )
+    tb.add_argument("--episodes", type=_positive, default=None, help="only the first N episodes of each row")
+    tb.add_argument("--episodes-per-house", type=_positive, default=10, help="procedural episodes per house")
+    tb.add_argument("--workers", type=_positive, default=1, help="episodes in parallel (default 1)")
+    tb.add_argument(
+        "--seg-noise",
+        type=float,
+        default=0.0,
+        metavar="P",
+        help="paper-2: perception errors for the rows the paper ran with a trained detector (default 0)",
+    )
+
     sc = sub.add_parser("scenes", help="list the scenes and floors of a dataset split, or audit them")
     sc.add_argument(
         "action",
@@ -340,6 +363,8 @@ def main(argv: list[str] | None = None, extra: dict[str, Command] | None = None)
 
             print(format_pairing(compare_results(args.a, args.b, seed=args.seed)))
             return 0
+        if args.command == "table":
+            return _cmd_table(args)
         if args.command == "scenes":
             return _cmd_audit(args) if args.action == "audit" else _cmd_scenes(args)
         if args.command == "episodes":
@@ -600,6 +625,28 @@ def _cmd_eval(args: argparse.Namespace) -> int:
             f"(first: {run.unwritten[0]})"
         )
     return 130 if run.interrupted else 0
+
+
+def _cmd_table(args: argparse.Namespace) -> int:
+    from l3mvn.core.writing import make_folder
+    from l3mvn.run.eval.paper_tables import TableRun, run_table
+
+    make_folder(args.results, "--results")
+    run = TableRun(
+        args.dataset,
+        args.split,
+        _config(args),
+        Path(args.results),
+        episodes=args.episodes,
+        workers=args.workers,
+        seg_noise=args.seg_noise,
+        scenes=args.scenes,
+        houses=args.houses,
+        episodes_per_house=args.episodes_per_house,
+        seed=args.seed,
+    )
+    print(run_table(args.name, run, stream=sys.stderr))
+    return 0
 
 
 def _cmd_language(args: argparse.Namespace) -> int:
