@@ -18,6 +18,7 @@ scores an object set once across episodes, runs and worker processes.
 from __future__ import annotations
 
 import copy
+import hashlib
 import inspect
 import json
 import logging
@@ -72,7 +73,7 @@ class LLMScorer(Scorer):
         self.prompt = prompt
         self.llm = loaded or load_llm(model)
         self.model_name = self.llm.model_id
-        self._disk = _DiskCache(self.llm.folder / "scores.jsonl", prompt)
+        self._disk = _DiskCache(self.llm.folder / "scores.jsonl", _prompt_key(prompt))
         self._priors: dict[str, float] = {}
         # transformers 5 names the key-value cache ``cache``; earlier releases ``past_key_values``.
         self._kv_arg = "cache" if "cache" in inspect.signature(self.llm.model.forward).parameters else "past_key_values"
@@ -152,6 +153,12 @@ class LLMScorer(Scorer):
                 score += float(logp.gather(-1, rest[0, 1:, None]).sum())
             out.append(score)
         return out
+
+
+def _prompt_key(prompt: str) -> str:
+    """The prompt's name and a digest of its wording: scores kept for another wording never count."""
+    wording = zero_shot_query(("sink",), "bed") if prompt == "paper" else contrastive_context(("sink",))
+    return f"{prompt}-{hashlib.sha1(wording.encode()).hexdigest()[:8]}"
 
 
 def _kv_state(output: Any) -> Any:
