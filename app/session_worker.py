@@ -36,6 +36,7 @@ from l3mvn.run.registry import (
     language_policies,
     names_where,
     reads_language,
+    scorer_choice,
     scorer_of,
     with_scorer,
 )
@@ -415,7 +416,13 @@ class DashboardController:
             self._runner.close()
             self._runner, self._swapped_live = Runner(cfg, seed=self.seed), False
         if reads_language(self.policy_name) and self.policy_name not in self._runner.floor(scene).policies:
-            self._set_busy(f"loading the language model of {self.policy_name} (a few seconds, once)")
+            self._set_busy(
+                f"loading the language model of {self.policy_name} (a few seconds; the first time an "
+                "LLM is converted for torch, tens of seconds)"
+            )
+            asked = replace(self.cfg.policy, scorer=self.scorer or self.cfg.policy.scorer)
+            if fallback := scorer_choice(self.policy_name, asked)[1]:
+                self._notify(fallback, level="warning")
         # The same hash ``l3mvn eval`` writes for these settings, so dashboard runs can be matched.
         chash = config_hash(cfg, self.policy_name, self.seed)
         self._session = self._runner.session(scene, self.policy_name, self.bus, config_hash=chash)

@@ -112,3 +112,16 @@ def test_the_dropdown_starts_on_the_configs_head_and_is_held_with_the_other_cont
     assert head.value == "frontiers-bag" and tuple(head.options) == (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS
     assert head in dash.view._held
     assert "feed-forward scoring only (l3mvn-ff, near+llm or Scorer feedforward)" in head.hint
+
+
+def test_without_an_llm_the_zero_shot_policy_says_what_it_scores_with_instead(monkeypatch):
+    from l3mvn.agent.language import llm
+
+    monkeypatch.setattr(llm, "llm_problem", lambda model: f"LLM {model!r} is not installed")
+    c = _controller(SMALL, "l3mvn-zs")
+    try:
+        session = _reset(c)
+        assert session.policy.global_policy.scorer_name == "roomtype"
+        assert any("scores with 'roomtype' instead of an LLM" in n.text and n.level == "warning" for n in c.notices)
+    finally:
+        c.close()

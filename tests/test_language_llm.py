@@ -140,3 +140,11 @@ def test_smollm2_puts_the_toilet_first_beside_a_sink_and_a_bathtub(prompt):
     bathroom, bedroom = scorer.score([("sink", "bathtub", "shower"), ("bed", "nightstand", "wardrobe")])
     assert max(bathroom, key=bathroom.get) == "toilet" and max(bedroom, key=bedroom.get) == "bed"
     assert scorer.model_name.startswith("smollm2-135m-")
+
+
+def test_an_unreadable_line_of_kept_scores_is_skipped_with_a_warning_and_scored_again(tiny_llm, tmp_path, caplog):
+    (tmp_path / "scores.jsonl").write_text('{"prompt": "paper", "objects": ["sink"], "go\n')  # cut short
+    fresh = LoadedLLM(tiny_llm.model_id, tiny_llm.tokenizer, tiny_llm.model, tmp_path)
+    with caplog.at_level("WARNING"):
+        scored = make_scorer("llm", loaded=fresh, prompt="paper").score(SETS[:1])
+    assert "1 unreadable lines skipped" in caplog.text and sum(scored[0].values()) == pytest.approx(1.0)

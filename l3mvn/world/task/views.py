@@ -63,12 +63,8 @@ class ViewRecord:
         floor[valid] = cloud.points[:, 2] < self.config.sim.max_climb_m
         self._mark(self.seen_floor, points[floor])
         self._mark(self.seen_floor, _up_to_first_surface(points, valid, floor, pose, self.scene.resolution_m / 2))
-        self._mark(
-            self.seen_floor,
-            _between(
-                points[:-1][floor[:-1] & floor[1:]], points[1:][floor[:-1] & floor[1:]], self.scene.resolution_m / 2
-            ),
-        )
+        pairs = floor[:-1] & floor[1:]  # vertically neighbouring pixels that both met the floor
+        self._mark(self.seen_floor, _between(points[:-1][pairs], points[1:][pairs], self.scene.resolution_m / 2))
         self._mark_body(pose)
         if obs.goal in obs.categories:
             self._mark(self.goal_seen, points[valid & (semantic == obs.goal_id)])

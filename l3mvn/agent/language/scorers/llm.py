@@ -183,6 +183,7 @@ class _DiskCache:
         self.path, self.prompt = path, prompt
         self._warned = False
         self._scores: dict[tuple[ObjectKey, str], float] = {}
+        skipped = 0
         if path.is_file():
             for line in path.read_text(errors="replace").splitlines():
                 try:
@@ -190,7 +191,9 @@ class _DiskCache:
                     if rec["prompt"] == prompt:
                         self._scores[(tuple(sorted(rec["objects"])), rec["goal"])] = float(rec["score"])
                 except (ValueError, KeyError, TypeError):
-                    continue
+                    skipped += 1
+        if skipped:  # a line cut by a crash or a full disk: those scores are computed again
+            log.warning("%s: %d unreadable lines skipped; their scores are computed again", path, skipped)
 
     def forget(self) -> None:
         self._scores.clear()
