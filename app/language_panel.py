@@ -1,4 +1,5 @@
-"""The dashboard's Language folder: why the language prior preferred a frontier, as HTML.
+"""The dashboard's Language folder: why the prior (a language model, or PONI's potentials) preferred
+a frontier, as HTML.
 
 For the chosen frontier and the best few others: the scorer's p(goal | frontier) for every goal as
 bars in the map's category colours (the target ringed and named, as in the legend), the sentence the
@@ -10,7 +11,8 @@ the view only assigns the string.
 from __future__ import annotations
 
 from l3mvn.agent.frontiers import Fusion
-from l3mvn.run.registry import language_policies, reads_language
+from l3mvn.agent.frontiers.types import POTENTIALS_RULE as POTENTIALS
+from l3mvn.run.registry import language_policies, names_where, scores_frontiers
 from l3mvn.run.viz import category_color
 from l3mvn_studio.page_text import html
 from l3mvn_studio.state import FrontierMarker, MapView
@@ -21,24 +23,29 @@ _MUTED = "#666"
 
 
 def uses_language(policy: str) -> bool:
-    return reads_language(policy)
+    """Whether the folder has scores to show for ``policy``: a language policy's, or PONI's potentials."""
+    return scores_frontiers(policy)
 
 
 def language_html(view: MapView | None, policy: str, *, shown: int = SHOWN_FRONTIERS) -> str:
     """The whole folder for one snapshot: a note when there is nothing to show, else the rule line and
     one card per shown frontier (chosen first)."""
     if not uses_language(policy):
-        names = ", ".join(language_policies())
+        names = ", ".join(language_policies() + names_where(lambda spec: spec.prior and spec.same_as is None))
         return _note(
-            f"Policy <b>{html(policy)}</b> uses no language: it chooses its goals without a language "
-            f"model. Pick a language policy ({html(names)}) and press Reset to see its scores here."
+            f"Policy <b>{html(policy)}</b> uses no prior: it chooses its goals without a language model "
+            f"or a learned one. Pick a policy that scores frontiers ({html(names)}) and press Reset to see "
+            "its scores here."
         )
     if view is None or view.fusion is None or not view.frontiers:
         return _note(
-            f"Policy <b>{html(policy)}</b> scores frontiers with a language model: its scores appear "
+            f"Policy <b>{html(policy)}</b> scores frontiers with a prior: its scores appear "
             "here when the agent first chooses a frontier (after the look-around)."
         )
-    cards = "".join(frontier_card_html(f, view.target) for f in shown_frontiers(view.frontiers, view.fusion, shown))
+    score = _score_name(view.fusion)
+    cards = "".join(
+        frontier_card_html(f, view.target, score) for f in shown_frontiers(view.frontiers, view.fusion, shown)
+    )
     return (
         f'<div style="font-size:12px;line-height:1.35">{fusion_html(view.fusion, view.frontiers, view.goal_kind)}'
         f"{_key(view)}{cards}</div>"
@@ -80,15 +87,17 @@ def fusion_html(fusion: Fusion, frontiers: tuple[FrontierMarker, ...], goal_kind
     return "".join(f'<div style="margin-bottom:4px">{line}</div>' for line in lines)
 
 
-def frontier_card_html(f: FrontierMarker, target: str) -> str:
-    """One frontier: its scores, objects and query, then a bar per goal (target ringed and first)."""
+def frontier_card_html(f: FrontierMarker, target: str, score: str = "S_LLM") -> str:
+    """One frontier: its scores (the target's named ``score``), objects and query, then a bar per goal
+    (target ringed and first)."""
     head = (
         f"<b>{'★ ' if f.chosen else ''}F{f.id}</b>{' (chosen)' if f.chosen else ''} &middot; "
-        f"S_LLM {_num(f.s_llm)} &middot; S_CU {f.s_cu:.2f} &middot; fused {_num(f.fused)} &middot; "
+        f"{score} {_num(f.s_llm)} &middot; S_CU {f.s_cu:.2f} &middot; fused {_num(f.fused)} &middot; "
         f"{f.distance_m:.1f} m away"
     )
     objects = html(", ".join(f.objects)) or "none"
     query = query_of(f, target)
+    said = html(query) if query else ("read from the map" if score != "S_LLM" else "no query: no informative object")
     goals = sorted(f.llm_scores, key=lambda g: g != target)
     bars = "".join(bar_html(g, f.llm_scores[g], target=g == target, metres=f.expected_m.get(g)) for g in goals)
     border = "2px solid #333" if f.chosen else "1px solid #ccc"
@@ -96,7 +105,7 @@ def frontier_card_html(f: FrontierMarker, target: str) -> str:
         f'<div style="border:{border};border-radius:4px;padding:4px 6px;margin:6px 0">'
         f"<div>{head}</div>"
         f'<div style="color:{_MUTED}">objects: {objects}</div>'
-        f'<div style="margin:2px 0"><i>{html(query) if query else "no query: no informative object"}</i></div>'
+        f'<div style="margin:2px 0"><i>{said}</i></div>'
         f"{bars or _note('no per-goal scores')}</div>"
     )
 
@@ -124,8 +133,18 @@ def query_of(f: FrontierMarker, target: str) -> str:
     return f.queries.get(target) or next(iter(f.queries.values()), "")
 
 
+def _score_name(fusion: Fusion) -> str:
+    return "potential" if fusion.rule == POTENTIALS else "S_LLM"
+
+
 def _key(view: MapView) -> str:
     metres = any(f.expected_m for f in view.frontiers)
+    if view.fusion is not None and view.fusion.rule == POTENTIALS:
+        return (
+            f'<div style="color:{_MUTED};margin-bottom:2px">Bars: the object potential PONI predicts at the '
+            "frontier for every goal (1 at the goal, 0 at its range or beyond), the target ringed; metres: "
+            "the distance on to each goal it implies.</div>"
+        )
     text = (
         "Bars: the scorer's p(goal | frontier) for every goal, the target ringed; S_LLM is the target's "
         "score as the rule reads it"

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+from l3mvn.agent.frontiers.types import POTENTIALS_RULE
 from l3mvn.run.registry import keeps_map
 from l3mvn.run.viz import COLLISION_RGB
 from l3mvn_studio.frontier_ranking import TOP_LABELS, frontier_score
@@ -96,7 +97,9 @@ def frontier_markdown(view: MapView) -> str:
             if view.source != "agent map"
             else "_no frontiers on the map right now_"
         )
-    rows = ["| | S_LLM | S_CU | fused | objects |", "|---|---|---|---|---|"]
+    # PONI's frontiers carry the target's object potential where a language policy's carry S_LLM.
+    score = "potential" if view.fusion is not None and view.fusion.rule == POTENTIALS_RULE else "S_LLM"
+    rows = [f"| | {score} | S_CU | fused | objects |", "|---|---|---|---|---|"]
     for f in sorted(view.frontiers, key=frontier_score, reverse=True):
         llm = "-" if f.s_llm is None else f"{f.s_llm:.2f}"
         fused = "-" if f.fused is None else f"{f.fused:.2f}"

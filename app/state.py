@@ -33,12 +33,13 @@ class FrontierMarker:
     chosen: bool
     llm_scores: dict[str, float] = field(default_factory=dict)  # p(goal | frontier) for every goal
     expected_m: dict[str, float] = field(default_factory=dict)  # a distance head's metres to every goal
+    score_name: str = "LLM"  # what ``s_llm`` holds: a language model's score, or PONI's potential ("pot")
 
     @property
     def label(self) -> str:
         llm = "-" if self.s_llm is None else f"{self.s_llm:.2f}"
         fused = "-" if self.fused is None else f"{self.fused:.2f}"
-        return f"F{self.id}  LLM {llm} | CU {self.s_cu:.2f} | fused {fused}"
+        return f"F{self.id}  {self.score_name} {llm} | CU {self.s_cu:.2f} | fused {fused}"
 
 
 @dataclass(frozen=True, eq=False)

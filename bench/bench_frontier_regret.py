@@ -1,7 +1,7 @@
 """How good is each global policy's frontier choice, judged by the ground truth, on the same maps?
 
     python bench/bench_frontier_regret.py --dataset DIR [--split train] [--workers 2] [--limit N]
-        [--houses held-out | --houses A B ...]
+        [--houses held-out | --houses A B ...] [--only LABEL ...] [--poni CHECKPOINT.pt ...]
 
 ``--houses held-out`` keeps the houses ``house_split`` puts on the test side: the frontier-trained
 head never saw them (neither in training nor in choosing its checkpoint).
@@ -15,7 +15,8 @@ instead of through whole-episode SPL runs, whose seed spread hides small differe
 scores 0 by construction.
 
 Reported per policy: mean regret in metres overall and per goal, and how often its choice differs from
-cost-utility's.
+cost-utility's. ``--only`` runs some candidates (cost-utility always, the reference of the last
+column); ``--poni`` adds PONI with each checkpoint given.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 from l3mvn.agent.language import GOALS  # noqa: E402
 from l3mvn.agent.language.frontier_head import house_split  # noqa: E402
 from l3mvn.agent.policies.oracle_frontier import frontier_goal_distances  # noqa: E402
-from l3mvn.core.config import Config, PolicyConfig  # noqa: E402
+from l3mvn.core.config import Config, PolicyConfig, PotentialConfig  # noqa: E402
 from l3mvn.run.registry import make_policy  # noqa: E402
 from l3mvn.run.runner import Runner  # noqa: E402
 from l3mvn.world.datasets import load_episode_set  # noqa: E402
@@ -58,13 +59,23 @@ CANDIDATES = [
     ("l3mvn-zs embedding", "l3mvn-zs", PolicyConfig(scorer="embedding")),
     ("near+llm", "near+llm", PolicyConfig()),
     ("oracle-frontier", "oracle-frontier", PolicyConfig()),  # 0 by construction: checks the bench
+    ("poni", "poni", PolicyConfig()),  # the shipped checkpoint
 ]
 
 _STATE: dict = {}
 
 
-def _episode(args: tuple[str | None, str, int, str]) -> list[tuple[str, str, float, bool]]:
-    dataset, split, index, behaviour = args
+def _candidates(only: list[str] | None, poni: list[str]) -> list[tuple[str, str, PolicyConfig, PotentialConfig]]:
+    chosen = [
+        (label, name, opts, PotentialConfig())
+        for label, name, opts in CANDIDATES
+        if only is None or label in only or label == "cost-utility"
+    ]
+    return chosen + [(f"poni {Path(c).name}", "poni", PolicyConfig(), PotentialConfig(checkpoint=c)) for c in poni]
+
+
+def _episode(args: tuple[str | None, str, int, str, list]) -> list[tuple[str, str, float, bool]]:
+    dataset, split, index, behaviour, chosen = args
     if "eset" not in _STATE:
         _STATE["eset"] = load_episode_set(dataset, split, cfg=_STATE.setdefault("cfg", Config().with_frame(120, 160)))
     eset, cfg = _STATE["eset"], _STATE["cfg"]
@@ -72,8 +83,8 @@ def _episode(args: tuple[str | None, str, int, str]) -> list[tuple[str, str, flo
     runner = Runner(cfg, config_hash="bench")
     floor = runner.floor(eset.scene_of(ep))
     candidates = [
-        (label, make_policy(name, floor.env, floor.task, cfg.replace(policy=opts)).global_policy)
-        for label, name, opts in CANDIDATES
+        (label, make_policy(name, floor.env, floor.task, cfg.replace(policy=opts, poni=poni)).global_policy)
+        for label, name, opts, poni in chosen
     ]
     session = runner.session(eset.scene_of(ep), behaviour)
     session.start(ep)
@@ -116,7 +127,11 @@ def main() -> None:
         help="only these houses; 'held-out': the test side of the frontier head's house split",
     )
     parser.add_argument("--json", action="store_true", help="print the table as one JSON line too")
+    labels = [label for label, _, _ in CANDIDATES]
+    parser.add_argument("--only", nargs="+", default=None, choices=labels, help="these candidates only")
+    parser.add_argument("--poni", nargs="+", default=[], help="PONI checkpoints to add as candidates")
     args = parser.parse_args()
+    chosen_candidates = _candidates(args.only, args.poni)
     eset = load_episode_set(args.dataset, args.split, cfg=Config().with_frame(120, 160))
     chosen = list(range(len(eset.episodes)))
     if args.houses == ["held-out"]:
@@ -129,7 +144,7 @@ def main() -> None:
     chosen = chosen[: args.limit]
     n = len(chosen)
     houses = sorted({eset.episodes[i].scene for i in chosen})
-    jobs = [(args.dataset, args.split, i, args.behaviour) for i in chosen]
+    jobs = [(args.dataset, args.split, i, args.behaviour, chosen_candidates) for i in chosen]
     regret: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     changed: dict[str, list[bool]] = defaultdict(list)
     with get_context("forkserver").Pool(args.workers) as pool:
@@ -146,7 +161,7 @@ def main() -> None:
     print("| policy | " + " | ".join(goals) + " | differs from cost-utility |")
     print("|---" * (len(goals) + 2) + "|")
     table = {}
-    for label, _, _ in CANDIDATES:
+    for label, *_ in chosen_candidates:
         means = {g: float(np.mean(regret[label][g])) for g in goals}
         table[label] = {"regret_m": means, "differs": float(np.mean(changed[label]))}
         print(f"| {label} | " + " | ".join(f"{means[g]:.3f}" for g in goals) + f" | {np.mean(changed[label]):.3f} |")

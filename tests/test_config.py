@@ -91,7 +91,7 @@ def test_cross_section_rules_see_both_sections():
 
 def test_the_tree_is_plain_data_in_section_order():
     tree = config_dict(Config())
-    assert tuple(tree) == SECTIONS == ("sim", "task", "map", "frontiers", "planner", "agent", "policy")
+    assert tuple(tree) == SECTIONS == ("sim", "task", "map", "frontiers", "planner", "agent", "policy", "poni")
     assert tree["sim"]["max_steps"] == 500 and tree["task"]["success_rule"] == "semexp"
     assert "map_resolution_m" not in tree["sim"] and "resolution_m" not in tree["planner"]
 

@@ -1,5 +1,6 @@
 """The Language folder in a real browser: an l3mvn-zs episode on a procedural house shows per-goal
-bars and the fusion rule line with the numbers of the snapshot; a policy without language says so.
+bars and the fusion rule line with the numbers of the snapshot; a policy without language says so;
+PONI shows its potentials the same way.
 
 Skips like tests/test_dashboard_browser.py when playwright or a chromium is missing. Set
 L3MVN_SCREENSHOTS=DIR to keep the screenshot (docs/screenshots/dashboard_language_panel.png).
@@ -50,7 +51,7 @@ def test_the_language_folder_shows_bars_and_the_fusion_rule_of_the_choice(dash, 
             page.goto(dash.url)
             page.wait_for_selector("canvas", timeout=20_000)
             _wait(
-                lambda: "scores frontiers with a language model" in _panel_text(page),
+                lambda: "scores frontiers with a prior" in _panel_text(page),
                 timeout=20,
                 what="the Language folder's note before the first choice",
             )
@@ -93,9 +94,62 @@ def test_the_language_folder_shows_bars_and_the_fusion_rule_of_the_choice(dash, 
             ctl.set_policy("cost-utility")
             page.get_by_role("button", name="Reset").click()
             _wait(
-                lambda: "cost-utility uses no language" in _panel_text(page),
+                lambda: "cost-utility uses no prior" in _panel_text(page),
                 timeout=30,
                 what="the note of a policy without language",
             )
+        finally:
+            browser.close()
+
+
+@pytest.fixture(scope="module")
+def poni_dash():
+    yield from serve_dashboard(episodes_per_house=2, policy="poni", cfg=Config().with_frame(240, 320))
+
+
+def test_the_language_folder_shows_ponis_potentials_like_a_language_models_scores(poni_dash, tmp_path):
+    shots = Path(os.environ.get("L3MVN_SCREENSHOTS", tmp_path))
+    ctl = poni_dash.controller
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport=VIEWPORT)
+            page.set_default_timeout(60_000)
+            page.goto(poni_dash.url)
+            page.wait_for_selector("canvas", timeout=20_000)
+            _wait(
+                lambda: "poni scores frontiers with a prior" in _panel_text(page),
+                timeout=20,
+                what="the Language folder's note before the first choice",
+            )
+            page.get_by_role("button", name="Reset").click()
+            _wait(lambda: _step_shown(page) == 0, timeout=60, what="step 0")
+            for _ in range(MAX_CLICKS):
+                view = ctl.snapshot.map
+                if view is not None and view.fusion is not None:
+                    break
+                n = _step_shown(page)
+                page.get_by_role("button", name="Step").click()
+                _wait(lambda n=n: (_step_shown(page) or 0) > n, timeout=30, what="the next step")
+            view = ctl.snapshot.map
+            assert view is not None and view.fusion is not None, "the agent never chose a frontier"
+            assert view.fusion.rule == "potentials" and view.fusion.scorer.startswith("poni (poni.pt)")
+            line = view.fusion.describe()
+            assert line.startswith("PONI: least metres to the frontier")
+            _wait(lambda: line in _panel_text(page), what="PONI's rule line with the snapshot's numbers")
+            text = _panel_text(page)
+            chosen = next(f for f in view.frontiers if f.chosen)
+            assert f"★ F{chosen.id} (chosen)" in text and "object potential PONI predicts" in text
+            assert f"potential {chosen.s_llm:.2f}" in text
+            assert "S_LLM" not in text  # the Frontiers table names its column "potential" too
+            assert all(f.label.startswith(f"F{f.id}  pot ") for f in view.frontiers)  # and the map's labels
+            metres = chosen.expected_m[view.target]
+            assert f"{chosen.llm_scores[view.target]:.2f} {metres:.1f} m" in text  # the bar's value and its metres
+            assert page.locator("span[data-goal]").count() % 6 == 0 and page.locator("span[data-goal]").count() >= 6
+            for folder in ("Camera", "Frontiers"):
+                page.get_by_text(folder, exact=True).first.click()
+            page.get_by_text("Language", exact=True).first.evaluate("e => e.scrollIntoView({block: 'start'})")
+            page.wait_for_timeout(500)
+            page.screenshot(path=str(shots / "dashboard_poni_panel.png"))
         finally:
             browser.close()

@@ -67,11 +67,12 @@ def _view(frontiers, fusion=FUSION, target="toilet", goal_kind="frontier") -> Ma
     )
 
 
-def test_a_policy_without_language_says_which_and_that_it_uses_none():
+def test_a_policy_without_a_prior_says_which_and_that_it_uses_none():
     for policy in ("cost-utility", "oracle", "frontier", "exp"):
         html = language_html(None, policy)
-        assert f"<b>{policy}</b> uses no language" in html and "l3mvn-zs" in html
-    assert "uses no language" not in language_html(None, "exp+llm")  # the alias of l3mvn-ff
+        assert f"<b>{policy}</b> uses no prior" in html and "l3mvn-zs" in html and "poni" in html
+    assert "uses no prior" not in language_html(None, "exp+llm")  # the alias of l3mvn-ff
+    assert "uses no prior" not in language_html(None, "poni")
 
 
 def test_a_language_policy_before_its_first_choice_says_when_scores_appear():

@@ -197,3 +197,9 @@ def test_malformed_room_contents_file_raises(tmp_path):
 @pytest.mark.skipif(importlib.util.find_spec("procthor") is None, reason="procthor wheel not installed")
 def test_shipped_room_contents_equal_a_rebuild_from_the_procthor_wheel():
     assert dump_room_contents(build_room_contents()) == ROOM_CONTENTS_PATH.read_text()
+
+
+def test_houses_whose_door_would_round_wider_than_its_wall_span_build():
+    for seed in (718, 877):  # a door width rounded up to one cell more than the wall span it was cut in
+        scene = generate_house(seed)
+        assert scene.navigable.any() and scene.present_goals() == list(GOAL_CATEGORIES), seed

@@ -119,6 +119,7 @@ class Command:
 def _library_commands() -> dict[str, Command]:
     """Commands whose arguments and run live beside what they drive."""
     from l3mvn.run.eval import result_videos
+    from l3mvn.run.potentials import train as potentials_train
     from l3mvn.world.datasets import hm3d_export
 
     return {
@@ -132,6 +133,11 @@ def _library_commands() -> dict[str, Command]:
             "episode file (to run them here and on habitat-sim)",
             hm3d_export.add_export_arguments,
             hm3d_export.run_export,
+        ),
+        "poni": Command(
+            "the PONI policy's potential network: train it from full house maps, or show a checkpoint",
+            potentials_train.add_arguments,
+            potentials_train.run,
         ),
     }
 

@@ -28,7 +28,7 @@ from l3mvn.agent.modular.teleop import TeleopAgent
 from l3mvn.agent.policies.global_policies import CostUtility, GlobalPolicy, NearestFrontier, RandomSample
 from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
 from l3mvn.agent.policies.oracle_frontier import FrontierOracle
-from l3mvn.core.config import Config, PolicyConfig
+from l3mvn.core.config import Config, PolicyConfig, PotentialConfig
 from l3mvn.core.config.policy import LLM_SCORER
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.plugins import discover
@@ -70,7 +70,9 @@ class PolicySpec:
     dashboard draws its map and frontiers); ``language``: it scores frontiers with a language scorer
     (``--scorer``, ``--selection`` and ``--head`` apply); ``driven``: a person chooses its actions, so it
     never runs by itself (no eval, no comparison); ``ground_truth``: it reads the world, so it is built
-    with the environment and the task; ``same_as``: another name for that policy (the paper's)."""
+    with the environment and the task; ``same_as``: another name for that policy (the paper's);
+    ``prior``: it scores frontiers with a learned prior that is no language model (``--set poni.*``
+    applies; the Language folder shows its scores as it shows a language policy's)."""
 
     name: str
     build: Callable[[PolicyContext], Policy]
@@ -80,6 +82,7 @@ class PolicySpec:
     driven: bool = False
     ground_truth: bool = False
     same_as: str | None = None
+    prior: bool = False
 
 
 def _map_agent(global_policy: Callable[[PolicyContext], GlobalPolicy]) -> Callable[[PolicyContext], Policy]:
@@ -122,6 +125,20 @@ def _oracle_frontier(ctx: PolicyContext) -> GlobalPolicy:
     return FrontierOracle(ObjectDistances(ctx.task))
 
 
+@cache
+def _potential_model(checkpoint: str | None, cfg: PotentialConfig):  # -> PotentialModel (torch loads on first use)
+    from l3mvn.agent.potentials import PotentialModel
+
+    return PotentialModel.load(checkpoint, cfg)
+
+
+def _poni(ctx: PolicyContext) -> GlobalPolicy:
+    from l3mvn.agent.potentials import PotentialPolicy
+
+    cfg = ctx.config.poni
+    return PotentialPolicy(_potential_model(cfg.checkpoint, cfg), cfg)
+
+
 def _teleop(ctx: PolicyContext) -> Policy:
     # Frontiers scored by cost-utility, so the page shows what the agent would do.
     return TeleopAgent(CostUtility(), ctx.categories, ctx.config, ctx.seed)
@@ -161,6 +178,12 @@ BUILT_IN: tuple[PolicySpec, ...] = (
         _map_agent(_oracle_frontier),
         "the frontier nearest the goal by the ground truth: the ceiling for any frontier prior",
         ground_truth=True,
+    ),
+    PolicySpec(
+        "poni",
+        _map_agent(_poni),
+        "the frontier nearest the goal by PONI's potentials, predicted from the partial map (Table I's PONI)",
+        prior=True,
     ),
     PolicySpec(
         "l3mvn-zs",
@@ -250,6 +273,13 @@ def reads_language(name: str) -> bool:
     """Whether the policy ``name`` scores frontiers with a language scorer (an unknown name: False)."""
     spec = _registry()[0].get(name)
     return spec is not None and spec.language is not None
+
+
+def scores_frontiers(name: str) -> bool:
+    """Whether the policy ``name`` scores frontiers with a prior, a language scorer or another learned
+    one (an unknown name: False): what the dashboard's Language folder shows."""
+    spec = _registry()[0].get(name)
+    return spec is not None and (spec.language is not None or spec.prior)
 
 
 def language_policies() -> tuple[str, ...]:

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+POTENTIALS_RULE = "potentials"  # PONI's rule (l3mvn.agent.potentials.policy)
+
 
 @dataclass(frozen=True)
 class Fusion:
@@ -22,9 +24,11 @@ class Fusion:
     Tuples follow the frontier list (``ids[k]`` names frontier k, as ``F<id>``). ``branch`` is the
     case of ``rule`` that fired: paper ``language`` (max S_LLM above B), ``exploration`` (below B) or
     ``fused`` (inside B); official_code ``language``, ``first above 0.1`` or ``utility``; expected
-    ``least total``. ``compared`` is what the rule ranked by: paper the fused score, official_code
-    S_LLM with the no-object stand-in, expected the total metres (least wins). ``choice`` is the rule's
-    pick, which the agent's commitment may overrule in favour of the frontier it already pursues.
+    and potentials ``least total`` (potentials is PONI's: ``s_llm`` holds the goal's object
+    potential, ``explore`` the area potential, ``bonus_m`` the area bonus). ``compared`` is what the
+    rule ranked by: paper the fused score, official_code S_LLM with the no-object stand-in, expected
+    and potentials the total metres (least wins). ``choice`` is the rule's pick, which the agent's
+    commitment may overrule in favour of the frontier it already pursues.
     """
 
     rule: str
@@ -53,6 +57,11 @@ class Fusion:
             return (
                 "expected: least metres to the frontier - size bonus + expected metres on to the goal: "
                 + self._versus(self.compared, least=True, fmt=self._total)
+            )
+        if self.rule == POTENTIALS_RULE:
+            return (
+                "PONI: least metres to the frontier - area bonus + expected metres on to the goal (from the "
+                "object potential): " + self._versus(self.compared, least=True, fmt=self._total)
             )
         if self.rule == "official_code":  # S_LLM as compared: a frontier without objects counts 0.1 + 0.1 U / max U
             head = f"official code: max S_LLM {max(self.compared):.2f}"

@@ -23,6 +23,7 @@ from l3mvn.core.config.frontiers import EDGE_MODES, UTILITY_MODES, FrontierConfi
 from l3mvn.core.config.mapping import MapConfig
 from l3mvn.core.config.planner import PlannerConfig
 from l3mvn.core.config.policy import SELECTIONS, PolicyConfig
+from l3mvn.core.config.potentials import PotentialConfig
 from l3mvn.core.config.sim import SimConfig
 from l3mvn.core.config.task import SUCCESS_RULES, TaskConfig
 from l3mvn.core.errors import L3MVNError
@@ -37,6 +38,7 @@ class Config:
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     agent: AgentConfig = field(default_factory=AgentConfig)
     policy: PolicyConfig = field(default_factory=PolicyConfig)
+    poni: PotentialConfig = field(default_factory=PotentialConfig)
 
     def __post_init__(self) -> None:
         """Checks that span sections (each section checks its own fields)."""
@@ -220,6 +222,7 @@ __all__ = [
     "MapConfig",
     "PlannerConfig",
     "PolicyConfig",
+    "PotentialConfig",
     "SimConfig",
     "TaskConfig",
     "config_dict",

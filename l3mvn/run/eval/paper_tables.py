@@ -52,12 +52,7 @@ TABLES: dict[str, tuple[str, tuple[PaperRow, ...]]] = {
                 "SemExp's global policy is a network trained with reinforcement learning in habitat; "
                 "its checkpoint and training are not part of this project",
             ),
-            PaperRow(
-                "PONI",
-                {"Gibson": (0.736, 0.410, 1.250), "HM3D": None},
-                None,
-                "PONI's potential-function network is not in this project yet",
-            ),
+            PaperRow("PONI", {"Gibson": (0.736, 0.410, 1.250), "HM3D": None}, "poni"),
             PaperRow("L3MVN (Zero-Shot)", {"Gibson": (0.761, 0.377, 1.101), "HM3D": (0.504, 0.231, 4.427)}, "l3mvn-zs"),
             PaperRow(
                 "L3MVN (Feed-forward)", {"Gibson": (0.769, 0.388, 1.008), "HM3D": (0.542, 0.255, 3.934)}, "l3mvn-ff"

@@ -433,7 +433,9 @@ def _doors(rng: np.random.Generator, leaves: list[Rect], kinds: list[str], split
 
 def _cut(rng: np.random.Generator, rooms: tuple[int, int], span, width_m: float) -> Door:
     axis, line, lo, hi = span
-    w = int(round(width_m / _RES))
+    # The span was checked against the width rounded down; rounded to nearest it may be a cell wider
+    # than the span, and then the door takes the whole span.
+    w = min(int(round(width_m / _RES)), hi - lo)
     start = int(rng.integers(lo, hi - w + 1))
     a, b = line - _INTERIOR_WALL // 2, line - _INTERIOR_WALL // 2 + _INTERIOR_WALL
     cells = Rect(a, start, b, start + w) if axis == "h" else Rect(start, a, start + w, b)

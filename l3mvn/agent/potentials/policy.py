@@ -1,0 +1,93 @@
+"""PONI as a global policy: the frontier with the least (travel + expected metres on to the goal),
+both read from the potentials the network predicts on the agent's map.
+
+A frontier's potentials are the best over its cells (its label in training is the best over its
+cells too: the cell nearest the goal, the cell that opens the most floor). The object potential p of
+the goal becomes metres as the training defined it, ``range_m x (1 - p)``; the area potential earns a
+bonus of ``area_bonus_m`` metres at 1, the part of PONI that prefers frontiers opening onto much
+unexplored floor when no goal is expected near any of them. This is the frontier oracle's criterion
+with the network in place of the ground truth, and the "expected" rule of the language policies with
+the area potential in place of the frontier's size.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from l3mvn.agent.frontiers import Frontier, Fusion
+from l3mvn.agent.frontiers.types import POTENTIALS_RULE
+from l3mvn.agent.mapping import SemanticMap
+from l3mvn.agent.policies.global_policies import LanguageScore, Selection
+from l3mvn.agent.potentials.features import OUTPUTS, WindowGrid, window_features
+from l3mvn.agent.potentials.model import PotentialModel
+from l3mvn.core.config import PotentialConfig
+from l3mvn.core.errors import L3MVNError
+
+
+class PotentialPolicy:
+    name = "poni"
+
+    def __init__(self, model: PotentialModel, cfg: PotentialConfig) -> None:
+        self.model, self.cfg = model, cfg
+
+    def frontier_potentials(self, frontiers: list[Frontier], sem_map: SemanticMap) -> np.ndarray:
+        """(len(frontiers), len(OUTPUTS)): each frontier's best potential over its cells in the window
+        (0 for a frontier wholly outside it)."""
+        grid = WindowGrid.around(sem_map.agent_cell, sem_map.resolution_m, self.cfg)
+        features = window_features(sem_map.explored, sem_map.obstacle, sem_map.categories, sem_map.category_names, grid)
+        predicted = self.model.predict(features)
+        out = np.zeros((len(frontiers), len(OUTPUTS)), dtype=np.float64)
+        for k, f in enumerate(frontiers):
+            wr, wc, inside = grid.to_window(f.cells[:, 0], f.cells[:, 1])
+            if inside.any():
+                out[k] = predicted[:, wr[inside], wc[inside]].max(axis=1)
+        return out
+
+    def select(
+        self, frontiers: list[Frontier], sem_map: SemanticMap, goal: str, rng: np.random.Generator
+    ) -> Selection | None:
+        if not frontiers:
+            return None
+        if goal not in OUTPUTS[1:]:
+            raise L3MVNError(f"PONI predicts potentials for {', '.join(OUTPUTS[1:])}, not {goal!r}")
+        potentials = self.frontier_potentials(frontiers, sem_map)
+        area, objects = potentials[:, 0], potentials[:, 1:]
+        metres = self.cfg.range_m * (1.0 - objects)
+        on = metres[:, OUTPUTS.index(goal) - 1]
+        cost = np.array([f.cost for f in frontiers], dtype=np.float64)
+        bonus = self.cfg.area_bonus_m * area
+        total = cost - bonus + on
+        i = int(np.argmin(total))
+        span = float(total.max() - total.min())
+        fused = np.ones_like(total) if span <= 0 else 1.0 - (total - total.min()) / span
+        target = objects[:, OUTPUTS.index(goal) - 1]
+        fusion = Fusion(
+            rule=POTENTIALS_RULE,
+            branch="least total",
+            choice=i,
+            ids=tuple(f.id for f in frontiers),
+            s_llm=tuple(map(float, target)),
+            explore=tuple(map(float, area)),
+            compared=tuple(map(float, total)),
+            exploration="area potential",
+            cost_m=tuple(map(float, cost)),
+            bonus_m=tuple(map(float, bonus)),
+            expected_m=tuple(map(float, on)),
+            scorer=self.model.label,
+        )
+        goals = OUTPUTS[1:]
+        scores = tuple(
+            LanguageScore(
+                queries={},
+                llm_scores={g: round(float(p), 4) for g, p in zip(goals, row)},
+                s_llm=float(p_goal),
+                fused=float(v),
+                expected_m={g: round(float(m), 3) for g, m in zip(goals, far)},
+            )
+            for row, p_goal, v, far in zip(objects, target, fused, metres)
+        )
+        reason = (
+            f"PONI: {cost[i]:.1f} m to frontier - {bonus[i]:.1f} m area bonus + {on[i]:.1f} m expected on "
+            f"= {total[i]:.1f} m (least)"
+        )
+        return Selection(i, frontiers[i].center, fused, reason, scores, fusion)
