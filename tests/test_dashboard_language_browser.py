@@ -35,6 +35,22 @@ from l3mvn_studio.language_panel import BAR_PX, SHOWN_FRONTIERS  # noqa: E402
 MAX_CLICKS = 40  # the look-around takes 12 steps; episode 0 of house 0 (toilet) chooses at step 13
 
 
+def _step_to_first_choice(page, ctl, first: str):
+    """Reset, then Step until the agent has chosen a frontier; that snapshot's map view."""
+    page.get_by_role("button", name="Reset").click()
+    _wait(lambda: _step_shown(page) == 0, timeout=60, what=first)
+    for _ in range(MAX_CLICKS):
+        view = ctl.snapshot.map
+        if view is not None and view.fusion is not None:
+            return view
+        n = _step_shown(page)
+        page.get_by_role("button", name="Step").click()
+        _wait(lambda n=n: (_step_shown(page) or 0) > n, timeout=30, what="the next step")
+    view = ctl.snapshot.map
+    assert view is not None and view.fusion is not None, "the agent never chose a frontier"
+    return view
+
+
 @pytest.fixture(scope="module")
 def dash():
     yield from serve_dashboard(episodes_per_house=2, policy="l3mvn-zs", cfg=Config().with_frame(240, 320))
@@ -56,17 +72,7 @@ def test_the_language_folder_shows_bars_and_the_fusion_rule_of_the_choice(dash, 
                 what="the Language folder's note before the first choice",
             )
 
-            page.get_by_role("button", name="Reset").click()
-            _wait(lambda: _step_shown(page) == 0, timeout=60, what="step 0 (the language model loads once)")
-            for _ in range(MAX_CLICKS):
-                view = ctl.snapshot.map
-                if view is not None and view.fusion is not None:
-                    break
-                n = _step_shown(page)
-                page.get_by_role("button", name="Step").click()
-                _wait(lambda n=n: (_step_shown(page) or 0) > n, timeout=30, what="the next step")
-            view = ctl.snapshot.map
-            assert view is not None and view.fusion is not None, "the agent never chose a frontier"
+            view = _step_to_first_choice(page, ctl, "step 0 (the language model loads once)")
             line = view.fusion.describe()
             assert line.startswith("bound B = [0.15, 0.30]; max S_LLM")
             _wait(lambda: line in _panel_text(page), what="the fusion rule line with the snapshot's numbers")
@@ -122,17 +128,7 @@ def test_the_language_folder_shows_ponis_potentials_like_a_language_models_score
                 timeout=20,
                 what="the Language folder's note before the first choice",
             )
-            page.get_by_role("button", name="Reset").click()
-            _wait(lambda: _step_shown(page) == 0, timeout=60, what="step 0")
-            for _ in range(MAX_CLICKS):
-                view = ctl.snapshot.map
-                if view is not None and view.fusion is not None:
-                    break
-                n = _step_shown(page)
-                page.get_by_role("button", name="Step").click()
-                _wait(lambda n=n: (_step_shown(page) or 0) > n, timeout=30, what="the next step")
-            view = ctl.snapshot.map
-            assert view is not None and view.fusion is not None, "the agent never chose a frontier"
+            view = _step_to_first_choice(page, ctl, "step 0")
             assert view.fusion.rule == "potentials" and view.fusion.scorer.startswith("poni (poni.pt)")
             line = view.fusion.describe()
             assert line.startswith("PONI: least metres to the frontier")

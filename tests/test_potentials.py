@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 from scipy import ndimage as ndi
+from test_language_panel import _view
 
 from l3mvn.agent.frontiers import Frontier
 from l3mvn.agent.frontiers.types import POTENTIALS_RULE
@@ -35,7 +36,7 @@ from l3mvn.run.registry import policy_names, reads_language, scores_frontiers
 from l3mvn.world.scenes.procedural import generate_house
 from l3mvn.world.scenes.scene import SceneMap
 from l3mvn_studio.language_panel import language_html
-from l3mvn_studio.state import FrontierMarker, MapView
+from l3mvn_studio.state import FrontierMarker
 
 # A small window (32 cells of 0.2 m) keeps sampling and training quick; the geometry is otherwise the default.
 SMALL = PotentialConfig(input_window_m=6.4)
@@ -463,20 +464,7 @@ def _marker(i: int, chosen: bool) -> FrontierMarker:
 
 def test_the_language_folder_shows_poni_potentials_and_names_it_for_policies_without_a_prior(monkeypatch):
     chosen = _select(_policy(monkeypatch, _potentials(at={("bed", 0): 0.9})), (3.0, 1.0))
-    view = MapView(
-        image=np.zeros((4, 4, 3), np.uint8),
-        origin=(0, 0),
-        scale=1,
-        grid_shape=(4, 4),
-        resolution_m=0.05,
-        source="agent map",
-        agent_cell=(0, 0),
-        agent_heading=0.0,
-        goal_kind="frontier",
-        frontiers=(_marker(0, True), _marker(1, False)),
-        target="bed",
-        fusion=chosen.fusion,
-    )
+    view = _view((_marker(0, True), _marker(1, False)), fusion=chosen.fusion, target="bed")
     html = language_html(view, "poni")
     assert "object potential" in html and "read from the map" in html
     assert html.count("&middot; potential ") == 2 and "S_LLM" not in html

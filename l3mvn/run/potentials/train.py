@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, replace
@@ -307,6 +308,8 @@ def run(args: argparse.Namespace) -> int:
     )
     if options.epochs < 1 or options.batch < 1 or options.width < 8 or options.width % 8:
         raise L3MVNError("--epochs and --batch must be >= 1, --width a multiple of 8 (its group norm)")
+    if not (math.isfinite(options.learning_rate) and options.learning_rate > 0):
+        raise L3MVNError(f"--learning-rate must be a positive number, got {options.learning_rate}")
     summary = train_potentials(
         args.dataset,
         args.split,
