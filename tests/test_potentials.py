@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 from scipy import ndimage as ndi
+from test_global_policies import _map
 from test_language_panel import _view
 
 from l3mvn.agent.frontiers import Frontier
@@ -319,20 +320,7 @@ POLICY_CFG = PotentialConfig(input_window_m=1.6, range_m=12.0, area_bonus_m=3.0)
 def _sem_map(n: int = 64) -> SemanticMap:
     explored = np.zeros((n, n), bool)
     explored[20:44, 20:44] = True
-    return SemanticMap(
-        obstacle=np.zeros_like(explored),
-        explored=explored,
-        visited=np.zeros_like(explored),
-        categories=np.zeros((1, n, n), bool),
-        category_names=("bed",),
-        looked=explored,
-        resolution_m=0.05,
-        start_xy=(0.0, 0.0),
-        agent_cell=(n // 2, n // 2),
-        agent_heading=0.0,
-        local_cells=n,
-        footprint_radius_cells=3,
-    )
+    return _map(explored, np.zeros_like(explored))
 
 
 def _frontier(i: int, cells: list[tuple[int, int]], cost: float) -> Frontier:
@@ -488,6 +476,17 @@ def test_poni_train_refuses_an_out_that_is_no_pt_and_show_a_missing_file(tmp_pat
     assert "l3mvn poni train" in _error_line(capsys)
     assert main(["poni", "train", "--out", str(tmp_path / "y.pt"), "--width", "12"]) == 2
     assert "--width a multiple of 8" in _error_line(capsys)
+
+
+def test_eval_refuses_a_broken_checkpoint_once_before_any_episode(tmp_path, capsys):
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not a checkpoint")
+    out = tmp_path / "r.jsonl"
+    for checkpoint, said in ((tmp_path / "missing.pt", "does not exist"), (bad, "cannot read PONI checkpoint")):
+        argv = ["eval", "--policy", "poni", "--houses", "1", "--episodes", "2", "--frame", "60x80"]
+        assert main([*argv, "--set", f"poni.checkpoint={checkpoint}", "--out", str(out)]) == 2
+        assert said in _error_line(capsys)  # one line: no error row per episode
+        assert not out.exists()
 
 
 def test_poni_trains_shows_and_runs_an_episode_from_the_command_line(tmp_path, capsys, monkeypatch):

@@ -72,7 +72,9 @@ class PolicySpec:
     never runs by itself (no eval, no comparison); ``ground_truth``: it reads the world, so it is built
     with the environment and the task; ``same_as``: another name for that policy (the paper's);
     ``prior``: it scores frontiers with a learned prior that is no language model (``--set poni.*``
-    applies; the Language folder shows its scores as it shows a language policy's)."""
+    applies; the Language folder shows its scores as it shows a language policy's); ``ready``: checks
+    before the first episode that what it reads loads (a missing checkpoint is one error, not one per
+    episode)."""
 
     name: str
     build: Callable[[PolicyContext], Policy]
@@ -83,6 +85,7 @@ class PolicySpec:
     ground_truth: bool = False
     same_as: str | None = None
     prior: bool = False
+    ready: Callable[[Config], None] | None = None  # loads what the policy reads, or says in one line why not
 
 
 def _map_agent(global_policy: Callable[[PolicyContext], GlobalPolicy]) -> Callable[[PolicyContext], Policy]:
@@ -130,6 +133,10 @@ def _potential_model(checkpoint: str | None, cfg: PotentialConfig):  # -> Potent
     from l3mvn.agent.potentials import PotentialModel
 
     return PotentialModel.load(checkpoint, cfg)
+
+
+def _poni_ready(config: Config) -> None:
+    _potential_model(config.poni.checkpoint, config.poni)
 
 
 def _poni(ctx: PolicyContext) -> GlobalPolicy:
@@ -184,6 +191,7 @@ BUILT_IN: tuple[PolicySpec, ...] = (
         _map_agent(_poni),
         "the frontier nearest the goal by PONI's potentials, predicted from the partial map (Table I's PONI)",
         prior=True,
+        ready=_poni_ready,
     ),
     PolicySpec(
         "l3mvn-zs",
@@ -341,6 +349,13 @@ def check_options(name: str, options: PolicyConfig) -> None:
         )
     if not spec.map_based and options.seg_noise:
         raise L3MVNError(f"--seg-noise applies to map-based policies; {name!r} does not read the semantic frames")
+
+
+def check_ready(name: str, config: Config) -> None:
+    """Refuse, in one line, a policy whose model or checkpoint under ``config`` does not load."""
+    ready = policy_spec(name).ready
+    if ready is not None:
+        ready(config)
 
 
 def make_policy(name: str, env: Environment, task: ObjectNavTask, config: Config, seed: int = 0) -> Policy:

@@ -52,6 +52,15 @@ class GlobalPolicy(Protocol):
         """None when there is nothing to choose (no frontier)."""
 
 
+def least_total(total: np.ndarray) -> tuple[int, np.ndarray]:
+    """The frontier with the least total metres, and the totals flipped into [0, 1] scores (1 = least,
+    0 = most): the scale the agent's commitment margin reads."""
+    i = int(np.argmin(total))
+    span = float(total.max() - total.min())
+    scores = np.ones_like(total) if span <= 0 else 1.0 - (total - total.min()) / span
+    return i, scores
+
+
 def _pick(frontiers: list[Frontier], scores: np.ndarray, reason: str) -> Selection:
     i = int(np.argmax(scores))
     return Selection(i, frontiers[i].center, scores, reason.format(f=frontiers[i]))

@@ -33,7 +33,7 @@ import numpy as np
 
 from l3mvn.agent.frontiers import Frontier, Fusion
 from l3mvn.agent.mapping import SemanticMap
-from l3mvn.agent.policies.global_policies import LanguageScore, Selection
+from l3mvn.agent.policies.global_policies import LanguageScore, Selection, least_total
 from l3mvn.core.config import SELECTIONS, FrontierConfig, PolicyConfig
 from l3mvn.core.config.policy import HEAD_SCORER, LLM_SCORER
 from l3mvn.core.errors import L3MVNError
@@ -193,9 +193,7 @@ class LanguageFrontierPolicy:
         cost = np.array([f.cost for f in frontiers], dtype=np.float64)
         bonus = np.array([f.utility / self.cu_lambda for f in frontiers], dtype=np.float64)
         total = (cost - bonus) + metres
-        i = int(np.argmin(total))
-        span = total.max() - total.min()
-        fused = np.ones_like(total) if span <= 0 else 1.0 - (total - total.min()) / span
+        i, fused = least_total(total)
         fusion = self._fusion(
             frontiers,
             "least total",

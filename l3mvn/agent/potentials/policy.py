@@ -17,7 +17,7 @@ import numpy as np
 from l3mvn.agent.frontiers import Frontier, Fusion
 from l3mvn.agent.frontiers.types import POTENTIALS_RULE
 from l3mvn.agent.mapping import SemanticMap
-from l3mvn.agent.policies.global_policies import LanguageScore, Selection
+from l3mvn.agent.policies.global_policies import LanguageScore, Selection, least_total
 from l3mvn.agent.potentials.features import OUTPUTS, WindowGrid, window_features
 from l3mvn.agent.potentials.model import PotentialModel
 from l3mvn.core.config import PotentialConfig
@@ -57,9 +57,7 @@ class PotentialPolicy:
         cost = np.array([f.cost for f in frontiers], dtype=np.float64)
         bonus = self.cfg.area_bonus_m * area
         total = cost - bonus + on
-        i = int(np.argmin(total))
-        span = float(total.max() - total.min())
-        fused = np.ones_like(total) if span <= 0 else 1.0 - (total - total.min()) / span
+        i, fused = least_total(total)
         target = objects[:, OUTPUTS.index(goal) - 1]
         fusion = Fusion(
             rule=POTENTIALS_RULE,

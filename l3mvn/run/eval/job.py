@@ -23,7 +23,7 @@ from l3mvn.core.config import Config, config_dict, config_hash
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.events import EventBus, StepEvent
 from l3mvn.run.recording import Recorder
-from l3mvn.run.registry import check_options, check_policy, with_scorer
+from l3mvn.run.registry import check_options, check_policy, check_ready, with_scorer
 from l3mvn.run.runner import Runner
 from l3mvn.world.datasets import EpisodeSet, load_episode_set
 
@@ -59,10 +59,12 @@ class EvalJob:
     ) -> EvalJob:
         """A job whose config hash covers the whole config tree, the policy and the seed (recording
         changes no result, so it is not hashed); a language policy's scorer is written into the tree
-        first (``with_scorer``: its default may fall back where no LLM is installed)."""
+        first (``with_scorer``: its default may fall back where no LLM is installed), and a policy's
+        checkpoint is loaded once here, so a broken one fails the job before its first episode."""
         config = config or Config()
         check_options(check_policy(policy), config.policy)
         config = with_scorer(policy, config)
+        check_ready(policy, config)
         chash = config_hash(config, policy, seed)
         # Absolute paths, so workers started elsewhere (Ray) find the same files on a shared disk.
         source = None if dataset is None else str(Path(dataset).resolve())

@@ -20,6 +20,7 @@ import json
 import math
 import time
 from collections.abc import Callable, Iterator
+from contextlib import ExitStack
 from dataclasses import asdict, dataclass, replace
 from multiprocessing import get_context
 from pathlib import Path
@@ -85,7 +86,9 @@ def _draw(job: tuple[Source, int, int, PotentialConfig, RevealOptions]) -> Sampl
     truth = HouseTruth(scene, cfg, reveal)
     rng = np.random.default_rng(seed)
     got = [s for s in (truth.sample(rng) for _ in range(n)) if s is not None]
-    return SampleSet.join([SampleSet(s.features[None], s.labels[None], [s.house]) for s in got], cfg.window_cells)
+    if not got:
+        return SampleSet.join([], cfg.window_cells)
+    return SampleSet(np.stack([s.features for s in got]), np.stack([s.labels for s in got]), [s.house for s in got])
 
 
 def draw_samples(
@@ -100,18 +103,14 @@ def draw_samples(
     the same set whatever the worker count."""
     jobs = [(src, n, seed * 1_000_003 + k, cfg, reveal) for k, (src, n) in enumerate(sources)]
     parts: list[SampleSet] = []
-    if workers <= 1:
+    with ExitStack() as stack:
         results: Iterator[SampleSet] = map(_draw, jobs)
+        if workers > 1:
+            results = stack.enter_context(get_context("spawn").Pool(workers)).imap(_draw, jobs, chunksize=4)
         for part in results:
             parts.append(part)
             if progress:
                 progress(len(parts), len(jobs))
-    else:
-        with get_context("spawn").Pool(workers) as pool:
-            for part in pool.imap(_draw, jobs, chunksize=4):
-                parts.append(part)
-                if progress:
-                    progress(len(parts), len(jobs))
     return SampleSet.join(parts, cfg.window_cells)
 
 
