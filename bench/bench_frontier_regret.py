@@ -89,13 +89,11 @@ def _episode(args: tuple[str | None, str, int, str, list]) -> list[tuple[str, st
     session = runner.session(eset.scene_of(ep), behaviour)
     session.start(ep)
     region, rng = floor.task.region(ep.goal), np.random.default_rng(0)
-    rows, last = [], None
-    while not session.done:
-        decision = session.step().decision
-        frontiers = decision.frontiers if decision is not None else None
-        if not frontiers or len(frontiers) < 2 or frontiers is last or decision.goal_kind != "frontier":
+    rows = []
+    for _, decision in session.frontier_choices():
+        frontiers = decision.frontiers
+        if len(frontiers) < 2:
             continue
-        last = frontiers
         total = np.array([f.cost for f in frontiers]) + frontier_goal_distances(
             frontiers, decision.map, region.distances_at
         )

@@ -73,13 +73,9 @@ def _episode(job: tuple[str, str, int, PotentialConfig]) -> list[tuple[str, floa
     distances = partial(ObjectDistances(runner.floor(scene).task), ep.goal)
     session = runner.session(scene, "cost-utility")
     session.start(ep)
-    goal, rows, last = OUTPUTS.index(ep.goal), [], None
-    while not session.done:
-        decision = session.step().decision
-        frontiers = decision.frontiers if decision is not None else None
-        if not frontiers or frontiers is last or decision.goal_kind != "frontier":
-            continue
-        last, m = frontiers, decision.map
+    goal, rows = OUTPUTS.index(ep.goal), []
+    for _, decision in session.frontier_choices():
+        frontiers, m = decision.frontiers, decision.map
         true = np.minimum(frontier_goal_distances(frontiers, m, distances), pc.range_m)
         agent = pc.range_m * (1 - policy.frontier_potentials(frontiers, m)[:, goal])
         rho = _rho(true, agent)

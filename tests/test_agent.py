@@ -171,6 +171,19 @@ def test_reached_frontiers_are_not_chosen_again(env):
     assert chosen > 0
 
 
+def test_frontier_choices_step_to_the_end_and_yield_each_fresh_frontier_list_once(env):
+    task = ObjectNavTask(env.scene, _tree(env))
+    session = EpisodeSession(env, task, _agent(env), policy_name="frontier", config_hash="t")
+    session.start(_episode(goal="toilet"))  # in the other room: found after a few choices
+    choices = list(session.frontier_choices())
+    assert session.done and len(choices) >= 2
+    steps = [step for step, _ in choices]
+    assert steps == sorted(set(steps)) and steps[-1] <= session.env.steps
+    assert len({id(d.frontiers) for _, d in choices}) == len(choices)  # each list once
+    for _, decision in choices:
+        assert decision.goal_kind == "frontier" and decision.frontiers and decision.chosen_frontier is not None
+
+
 def test_random_sample_keeps_its_goal_until_reached_while_frontier_policies_reselect(env):
     from l3mvn.agent.policies.global_policies import RandomSample
 

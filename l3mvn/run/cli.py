@@ -135,7 +135,7 @@ def _library_commands() -> dict[str, Command]:
             hm3d_export.run_export,
         ),
         "poni": Command(
-            "the PONI policy's potential network: train it from full house maps, or show a checkpoint",
+            "the PONI policy's potential network: train it from full house maps and walks, or show a checkpoint",
             potentials_train.add_arguments,
             potentials_train.run,
         ),

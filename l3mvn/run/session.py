@@ -9,10 +9,11 @@ apart, as agent diagnostics, and never decides a failure cause.
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from typing import Protocol, runtime_checkable
 
-from l3mvn.agent.decision import Decision
+from l3mvn.agent.decision import Decision, GoalKind
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.types import Action, EpisodeBrief, Observation
 from l3mvn.run.events import EventBus, StepEvent
@@ -111,6 +112,22 @@ class EpisodeSession:
         while not self.done:
             self.step()
         return self.result
+
+    def frontier_choices(self) -> Iterator[tuple[int, Decision]]:
+        """Step to the episode's end, yielding (step number, decision) at every fresh choice among
+        frontiers: a step whose long-term goal is a frontier, with frontiers extracted anew (between
+        re-selections the agent keeps its list). What frontier data, PONI's walks and the benches
+        that replay choices read."""
+        step, last = 0, None
+        while not self.done:
+            decision = self.step().decision
+            step += 1
+            if decision is None or decision.goal_kind != GoalKind.FRONTIER or not decision.frontiers:
+                continue
+            if decision.frontiers is last:
+                continue
+            last = decision.frontiers
+            yield step, decision
 
     @property
     def result(self) -> EpisodeResult:

@@ -47,6 +47,12 @@ class WindowGrid:
         inside = (wr >= 0) & (wr < self.cells) & (wc >= 0) & (wc < self.cells)
         return wr, wc, inside
 
+    def flat_cells(self, cells: np.ndarray) -> np.ndarray:
+        """The distinct network cells, as flat indices into a window, of the (K, 2) map ``cells``
+        that fall inside it: where a frontier is read (its best cell) and, in training, labelled."""
+        wr, wc, inside = self.to_window(cells[:, 0], cells[:, 1])
+        return np.unique(wr[inside] * self.cells + wc[inside])
+
 
 def window_features(
     explored: np.ndarray,

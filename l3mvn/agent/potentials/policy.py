@@ -12,6 +12,8 @@ the area potential in place of the frontier's size.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from l3mvn.agent.frontiers import Frontier, Fusion
@@ -22,6 +24,13 @@ from l3mvn.agent.potentials.features import OUTPUTS, WindowGrid, window_features
 from l3mvn.agent.potentials.model import PotentialModel
 from l3mvn.core.config import PotentialConfig
 from l3mvn.core.errors import L3MVNError
+
+
+def expected_totals(cost: Any, potentials: Any, cfg: PotentialConfig) -> Any:
+    """(F, goals) metres the policy minimises, per frontier and goal: travel ``cost`` (F,) less the
+    area bonus plus the expected metres on, from ``potentials`` (F, len(OUTPUTS)). Plain arithmetic,
+    so numpy arrays (the policy) and torch tensors (the training loss) give the same numbers."""
+    return cost[:, None] - cfg.area_bonus_m * potentials[:, :1] + cfg.range_m * (1.0 - potentials[:, 1:])
 
 
 class PotentialPolicy:
@@ -35,12 +44,12 @@ class PotentialPolicy:
         (0 for a frontier wholly outside it)."""
         grid = WindowGrid.around(sem_map.agent_cell, sem_map.resolution_m, self.cfg)
         features = window_features(sem_map.explored, sem_map.obstacle, sem_map.categories, sem_map.category_names, grid)
-        predicted = self.model.predict(features)
+        predicted = self.model.predict(features).reshape(len(OUTPUTS), -1)
         out = np.zeros((len(frontiers), len(OUTPUTS)), dtype=np.float64)
         for k, f in enumerate(frontiers):
-            wr, wc, inside = grid.to_window(f.cells[:, 0], f.cells[:, 1])
-            if inside.any():
-                out[k] = predicted[:, wr[inside], wc[inside]].max(axis=1)
+            cells = grid.flat_cells(f.cells)
+            if len(cells):
+                out[k] = predicted[:, cells].max(axis=1)
         return out
 
     def select(
@@ -56,7 +65,7 @@ class PotentialPolicy:
         on = metres[:, OUTPUTS.index(goal) - 1]
         cost = np.array([f.cost for f in frontiers], dtype=np.float64)
         bonus = self.cfg.area_bonus_m * area
-        total = cost - bonus + on
+        total = expected_totals(cost, potentials, self.cfg)[:, OUTPUTS.index(goal) - 1]
         i, fused = least_total(total)
         target = objects[:, OUTPUTS.index(goal) - 1]
         fusion = Fusion(

@@ -27,7 +27,6 @@ from pathlib import Path
 
 import numpy as np
 
-from l3mvn.agent.decision import GoalKind
 from l3mvn.agent.frontiers import Frontier
 from l3mvn.agent.language.frontier_file import frontier_query, load_choices
 from l3mvn.agent.language.vocabulary import GOALS, canonical
@@ -152,15 +151,9 @@ def _walk(job: FrontierDataJob) -> tuple[str, int, list[dict]]:
     session = runner.session(scene, job.policy)
     session.start(ep)
     half = cfg.frontiers.window_cells(cfg.map.resolution_m)
-    rows, last, step = [], None, 0
-    while not session.done:
-        decision = session.step().decision
-        step += 1
-        frontiers = decision.frontiers if decision is not None else None
-        if not frontiers or frontiers is last or decision.goal_kind != GoalKind.FRONTIER:
-            continue
-        last = frontiers
-        sem_map = decision.map
+    rows = []
+    for step, decision in session.frontier_choices():
+        frontiers, sem_map = decision.frontiers, decision.map
         mapped = sorted(
             {
                 canonical(sem_map.category_names[k])

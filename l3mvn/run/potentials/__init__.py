@@ -1,2 +1,2 @@
-"""Training of PONI's potential network: partial maps drawn from full house maps (``samples``) and
-the ``l3mvn poni`` command (``train``)."""
+"""Training of PONI's potential network: partial maps drawn from full house maps (``samples``), the
+choices of a prior-free agent's walks (``walks``) and the ``l3mvn poni`` command (``train``)."""

@@ -29,9 +29,18 @@ from l3mvn.agent.planning import distance_field
 from l3mvn.agent.potentials import OUTPUTS, WindowGrid, window_features
 from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
 from l3mvn.core.config import PotentialConfig
+from l3mvn.world.scenes.procedural import generate_house
 from l3mvn.world.scenes.scene import SceneMap
 
 NO_LABEL = 255  # labels are stored as uint8: 0..254 for [0, 1], this for "no label here"
+
+# A floor to learn from: a scene, or the seed of a procedural house (built where it is used, so a
+# worker process receives a number, not a map).
+Source = SceneMap | int
+
+
+def source_scene(source: Source) -> SceneMap:
+    return generate_house(source) if isinstance(source, int) else source
 
 
 @dataclass(frozen=True)

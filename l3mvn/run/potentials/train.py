@@ -1,16 +1,24 @@
-"""``l3mvn poni train``: the PONI network from full house maps, with no interaction.
+"""``l3mvn poni train``: the PONI network from full house maps, with no interaction, then fine-tuned on
+the choices of an agent's own walks.
 
-Samples (``samples.HouseTruth``) come from the Gibson houses of a SemExp split, split by house (the
-same hash split as the feed-forward head's: train houses teach, val houses pick the epoch, test
-houses are reported and never used), and from procedural houses furnished from real rooms (all
-train). Loss: binary cross-entropy of each potential against its soft label, at labelled cells only.
-Every epoch is scored on the val houses; the best epoch's weights are kept and saved with what they
-were trained on and how they scored.
+First stage, drawn windows (``samples.HouseTruth``): partial maps drawn from the Gibson houses of a
+SemExp split, split by house (the same hash split as the feed-forward head's: train houses teach, val
+houses pick the epoch, test houses are reported and never used), and from procedural houses
+furnished from real rooms (all train). Loss: binary cross-entropy of each potential against its soft
+label, at labelled cells only. Every epoch is scored on the val houses; the best epoch's weights are
+kept.
 
-Scores: ``metres_mae``, the mean error of the expected metres on to each goal at labelled cells
-within range; ``regret_m``, per (window, goal), the true metres on from the labelled cell the network
-rates best, less the best cell's (0 = it picks the cell nearest the goal); ``chance_regret_m``, the
-same for a cell picked at random (what a prior that knows nothing loses).
+Second stage, walks (``walks``): a prior-free agent walks generated episodes on the same houses and
+procedural ones; at each of its choices the net is taught the true metres on from every frontier it
+chose among (pointwise) and their order by travel plus metres on (listwise), which is what the policy
+acts on. The epoch (the first stage's weights included) whose choices on the val houses' walks
+regret least is kept. The checkpoint is saved with what it was trained on and how it scored.
+
+Scores on drawn windows: ``metres_mae``, the mean error of the expected metres on to each goal at
+labelled cells within range; ``regret_m``, per (window, goal), the true metres on from the labelled
+cell the network rates best, less the best cell's (0 = it picks the cell nearest the goal);
+``chance_regret_m``, the same for a cell picked at random (what a prior that knows nothing loses). On
+walks: ``choice_regret``.
 """
 
 from __future__ import annotations
@@ -29,13 +37,12 @@ import numpy as np
 import torch
 
 from l3mvn.agent.language.frontier_head import HOUSE_SPLITS, house_split
-from l3mvn.agent.potentials import CHANNELS, OUTPUTS, PotentialModel, PotentialNet, shipped_checkpoint
+from l3mvn.agent.potentials import CHANNELS, OUTPUTS, PotentialModel, PotentialNet, expected_totals, shipped_checkpoint
 from l3mvn.agent.potentials.model import GEOMETRY
 from l3mvn.core.config import PotentialConfig
 from l3mvn.core.errors import L3MVNError
-from l3mvn.run.potentials.samples import NO_LABEL, HouseTruth, RevealOptions
-from l3mvn.world.scenes.procedural import generate_house
-from l3mvn.world.scenes.scene import SceneMap
+from l3mvn.run.potentials.samples import NO_LABEL, HouseTruth, RevealOptions, Source, source_scene
+from l3mvn.run.potentials.walks import WalkJob, WalkSet, walk_floors
 from l3mvn.world.scenes.semexp import load_split
 
 
@@ -50,6 +57,15 @@ class TrainOptions:
     width: int = 16  # the U-Net's first layer; each halving doubles it
     seed: int = 0
     workers: int = 2  # processes drawing samples
+    # The second stage: the agent's own choices (``walks``), fine-tuning the first stage's net.
+    walk_episodes: int = 12  # episodes walked per Gibson floor (train, val and test houses)
+    walk_procedural_houses: int = 1000
+    walk_episodes_per_procedural: int = 2
+    walk_epochs: int = 3
+    walk_learning_rate: float = 1e-3
+    walk_tau_m: float = 1.0  # the listwise loss's temperature over total metres
+    walk_height: int = 120  # the walks' frame: the map, not the pixels, is what the network reads
+    walk_width: int = 160
 
 
 @dataclass
@@ -76,14 +92,9 @@ class SampleSet:
         )
 
 
-# A floor to draw from: a scene, or the seed of a procedural house (built in the worker).
-Source = SceneMap | int
-
-
 def _draw(job: tuple[Source, int, int, PotentialConfig, RevealOptions]) -> SampleSet:
     source, n, seed, cfg, reveal = job
-    scene = generate_house(source) if isinstance(source, int) else source
-    truth = HouseTruth(scene, cfg, reveal)
+    truth = HouseTruth(source_scene(source), cfg, reveal)
     rng = np.random.default_rng(seed)
     got = [s for s in (truth.sample(rng) for _ in range(n)) if s is not None]
     if not got:
@@ -176,13 +187,15 @@ def fit(
     cfg: PotentialConfig,
     options: TrainOptions,
     progress: Callable[[str], None] | None = None,
+    net: PotentialNet | None = None,
 ) -> tuple[PotentialNet, list[dict[str, float]]]:
-    """The net after ``options.epochs`` epochs, with the weights of its best val epoch (by regret)."""
+    """``net`` (a new one if None) after ``options.epochs`` epochs, with the weights of its best val
+    epoch (by regret)."""
     if not len(train):
         raise L3MVNError("no training windows: the houses gave no frontier to label")
     torch.manual_seed(options.seed)
     rng = np.random.default_rng(options.seed)
-    net = PotentialNet(width=options.width)
+    net = net if net is not None else PotentialNet(width=options.width)
     opt = torch.optim.AdamW(net.parameters(), lr=options.learning_rate, weight_decay=1e-4)
     steps = options.epochs * max(1, len(train) // options.batch)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=options.learning_rate, total_steps=steps)
@@ -216,8 +229,142 @@ def fit(
     return net, history
 
 
+# --- the second stage: the choices of the agent's own walks ------------------------------------------------
+def _frontier_logits(logits: torch.Tensor, cells: list[np.ndarray]) -> tuple[torch.Tensor, np.ndarray]:
+    """(F, len(OUTPUTS)) logits of each frontier's best cell out of one window's (len(OUTPUTS), n*n),
+    and which frontiers have a cell in the window (the others read potential 0, as in the policy)."""
+    inside = np.array([len(c) > 0 for c in cells])
+    rows = [logits[:, c].amax(dim=1) if len(c) else torch.full((logits.shape[0],), -30.0) for c in cells]
+    return torch.stack(rows), inside
+
+
+def _walk_loss(
+    logits: torch.Tensor, walks: WalkSet, idx: np.ndarray, cfg: PotentialConfig, tau_m: float
+) -> torch.Tensor:
+    """Per frontier, binary cross-entropy of each goal's potential against ``1 - metres / range_m``;
+    per (choice, goal), the listwise cross-entropy between the softmax of the true totals (travel +
+    metres on) and of the totals the policy would compare: the order of frontiers is what it acts on."""
+    point, lists = logits.new_zeros(()), logits.new_zeros(())
+    n_point = n_lists = 0
+    for s, i in enumerate(idx):
+        cost, metres, cells = walks.frontiers(int(i))
+        per_frontier, inside = _frontier_logits(logits[s].reshape(len(OUTPUTS), -1), cells)
+        known = np.isfinite(metres) & inside[:, None]
+        mask = torch.from_numpy(known)
+        target = torch.from_numpy(np.clip(1.0 - np.nan_to_num(metres) / cfg.range_m, 0.0, 1.0).astype(np.float32))
+        bce = torch.nn.functional.binary_cross_entropy_with_logits(per_frontier[:, 1:], target, reduction="none")
+        point = point + (bce * mask).sum()
+        n_point += int(known.sum())
+        totals = expected_totals(torch.from_numpy(cost), torch.sigmoid(per_frontier), cfg)
+        true = torch.from_numpy(cost[:, None] + np.nan_to_num(metres))
+        for g in range(metres.shape[1]):
+            ok = torch.from_numpy(np.isfinite(metres[:, g]))
+            if int(ok.sum()) < 2:
+                continue
+            wanted = torch.softmax(-true[ok, g] / tau_m, dim=0)
+            lists = lists - (wanted * torch.log_softmax(-totals[ok, g] / tau_m, dim=0)).sum()
+            n_lists += 1
+    return point / max(n_point, 1) + lists / max(n_lists, 1)
+
+
+@torch.inference_mode()
+def choice_regret(net: PotentialNet, walks: WalkSet, cfg: PotentialConfig, batch: int = 32) -> dict[str, float]:
+    """Mean regret in metres of the policy's choice at the walks' choices: the true total (travel +
+    metres on) of the frontier it would take, less the least (a frontier off the true floor counts as
+    the worst known one). ``regret_m`` over every goal the house holds, ``goal_regret_m`` for the
+    episode's goal only; ``walker_*`` the same for the walking policy's own choice, ``nearest_*`` for
+    the nearest frontier."""
+    net.eval()
+    found: dict[str, list[float]] = {
+        k: [] for k in ("regret_m", "goal_regret_m", "walker_regret_m", "walker_goal_regret_m", "nearest_goal_regret_m")
+    }
+    for start in range(0, len(walks), batch):
+        idx = np.arange(start, min(start + batch, len(walks)))
+        logits = net(torch.from_numpy(walks.features[idx].astype(np.float32) / 255.0))
+        for s, i in enumerate(idx):
+            cost, metres, cells = walks.frontiers(int(i))
+            per_frontier, _ = _frontier_logits(logits[s].reshape(len(OUTPUTS), -1), cells)
+            totals = expected_totals(cost.astype(np.float64), torch.sigmoid(per_frontier).numpy(), cfg)
+            for g in range(metres.shape[1]):
+                known = np.isfinite(metres[:, g])
+                if not known.any():
+                    continue
+                true = cost + np.where(known, metres[:, g], metres[known, g].max())
+                regret = true - true.min()
+                found["regret_m"].append(float(regret[int(np.argmin(totals[:, g]))]))
+                if walks.choice[i] >= 0:
+                    found["walker_regret_m"].append(float(regret[walks.choice[i]]))
+                if g == walks.goal[i]:
+                    found["goal_regret_m"].append(found["regret_m"][-1])
+                    found["nearest_goal_regret_m"].append(float(regret[int(np.argmin(cost))]))
+                    if walks.choice[i] >= 0:
+                        found["walker_goal_regret_m"].append(float(regret[walks.choice[i]]))
+    out = {k: float(np.mean(v)) if v else float("nan") for k, v in found.items()}
+    return out | {"choices": len(walks)}
+
+
+def fit_walks(
+    net: PotentialNet,
+    train: WalkSet,
+    val: WalkSet,
+    cfg: PotentialConfig,
+    options: TrainOptions,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[PotentialNet, list[dict[str, float]]]:
+    """``net`` fine-tuned on the walks' choices for ``options.walk_epochs`` epochs, keeping the
+    weights (the starting ones included) whose choices on the val houses' walks regret least."""
+    torch.manual_seed(options.seed)
+    rng = np.random.default_rng(options.seed)
+    opt = torch.optim.AdamW(net.parameters(), lr=options.walk_learning_rate, weight_decay=1e-4)
+    batches = max(1, len(train) // options.batch)
+    sched = torch.optim.lr_scheduler.OneCycleLR(
+        opt, max_lr=options.walk_learning_rate, total_steps=options.walk_epochs * batches
+    )
+    history: list[dict[str, float]] = []
+    best: tuple[float, dict[str, torch.Tensor]] | None = None
+    for epoch in range(options.walk_epochs + 1):
+        started, total = time.monotonic(), 0.0
+        if epoch:
+            net.train()
+            order = rng.permutation(len(train))
+            for b in range(batches):
+                idx = np.sort(order[b * options.batch : (b + 1) * options.batch])
+                x = torch.from_numpy(train.features[idx].astype(np.float32) / 255.0)
+                loss = _walk_loss(_turned(net, x, rng), train, idx, cfg, options.walk_tau_m)
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                sched.step()
+                total += loss.item()
+        row: dict[str, float] = {"walk_epoch": epoch, "seconds": time.monotonic() - started}
+        if epoch:
+            row["train_loss"] = total / batches
+        if len(val):
+            row.update({f"val_{k}": v for k, v in choice_regret(net, val, cfg).items() if k != "choices"})
+            score = row["val_regret_m"]
+            if best is None or score < best[0]:
+                best = (score, {k: v.detach().clone() for k, v in net.state_dict().items()})
+        history.append(row)
+        if progress:
+            progress(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in row.items()}))
+    if best is not None:
+        net.load_state_dict(best[1])
+    net.eval()
+    return net, history
+
+
+def _turned(net: PotentialNet, x: torch.Tensor, rng: np.random.Generator) -> torch.Tensor:
+    """The net's logits for ``x`` seen turned a random quarter and flipped, turned back: the labels
+    stay at their cells, and a map's orientation carries no meaning."""
+    k, flip = int(rng.integers(4)), bool(rng.integers(2))
+    x = torch.rot90(x, k, dims=(2, 3))
+    out = net(torch.flip(x, dims=(3,)) if flip else x)
+    out = torch.flip(out, dims=(3,)) if flip else out
+    return torch.rot90(out, -k, dims=(2, 3))
+
+
 def gibson_sources(dataset: str, split: str, per_floor: int) -> dict[str, list[tuple[Source, int]]]:
-    """The floors of a SemExp split by house split (train / val / test)."""
+    """The floors of a SemExp split by house split (train / val / test), each with ``per_floor``."""
     out: dict[str, list[tuple[Source, int]]] = {s: [] for s in HOUSE_SPLITS}
     for house, floors in load_split(dataset, split).items():
         for scene in floors.values():
@@ -232,58 +379,122 @@ def train_potentials(
     cfg: PotentialConfig = PotentialConfig(),
     options: TrainOptions = TrainOptions(),
     reveal: RevealOptions = RevealOptions(),
+    init: str | Path | None = None,
     log: Callable[[str], None] = print,
 ) -> dict:
-    """Draw, train, score on the held-out houses and save; returns the training record."""
+    """Draw windows and train on them (first stage), walk and fine-tune on the walks' choices (second
+    stage), score on the held-out houses and save; returns the summary. ``init``: a checkpoint to
+    start from instead of random weights (a stage with no data is skipped)."""
     out = Path(out)
     if out.suffix != ".pt":
         raise L3MVNError(f"--out must be a .pt file, got {out}")
     if not out.parent.is_dir():
         raise L3MVNError(f"--out: folder {out.parent} does not exist")
-    sources = gibson_sources(dataset, split, options.samples_per_floor) if dataset else {s: [] for s in HOUSE_SPLITS}
-    procedural: list[tuple[Source, int]] = [
-        (options.seed * 100_000 + k, options.samples_per_procedural) for k in range(options.procedural_houses)
+    start = PotentialModel.load(init, cfg) if init is not None else None
+    net = start.net if start is not None else PotentialNet(width=options.width)
+    options = replace(options, width=net.width)
+
+    def floors(per_floor: int) -> dict[str, list[tuple[Source, int]]]:
+        return gibson_sources(dataset, split, per_floor) if dataset else {s: [] for s in HOUSE_SPLITS}
+
+    drawn = floors(options.samples_per_floor)
+    drawn["train"] += [
+        (_procedural_seed(options, k), options.samples_per_procedural) for k in range(options.procedural_houses)
     ]
-    if not sources["train"] and not procedural:
-        raise L3MVNError("nothing to train on: give --dataset with train houses, or --procedural N > 0")
+    walked = floors(options.walk_episodes)
+    walked["train"] += [
+        (_procedural_seed(options, k), options.walk_episodes_per_procedural)
+        for k in range(options.walk_procedural_houses)
+    ]
+    drawn = {k: [(src, n) for src, n in v if n > 0] for k, v in drawn.items()}
+    walked = {k: [(src, n) for src, n in v if n > 0] for k, v in walked.items()}
+    if not drawn["train"] and not walked["train"]:
+        raise L3MVNError("nothing to train on: give --dataset with train houses, or procedural houses to draw or walk")
     sets: dict[str, SampleSet] = {}
-    for name, floors in (("train", sources["train"] + procedural), ("val", sources["val"]), ("test", sources["test"])):
-        started = time.monotonic()
+    walks: dict[str, WalkSet] = {}
+    history: list[dict[str, float]] = []
+    walk_history: list[dict[str, float]] = []
+    if drawn["train"]:
+        for name in HOUSE_SPLITS:
+            started = time.monotonic()
 
-        def tick(done: int, total: int, name: str = name) -> None:
-            if done == total or done % 100 == 0:
-                log(f"drawing {name} windows: {done}/{total} floors")
+            def tick(done: int, total: int, name: str = name) -> None:
+                if done == total or done % 100 == 0:
+                    log(f"drawing {name} windows: {done}/{total} floors")
 
-        sets[name] = draw_samples(floors, cfg, reveal, options.seed + HOUSE_SPLITS.index(name), options.workers, tick)
-        log(f"{name}: {len(sets[name])} windows from {len(floors)} floors in {time.monotonic() - started:.0f} s")
-    net, history = fit(sets["train"], sets["val"], cfg, options, log)
-    scores = {name: evaluate(net, sets[name], cfg) for name in ("val", "test") if len(sets[name])}
+            seed = options.seed + HOUSE_SPLITS.index(name)
+            sets[name] = draw_samples(drawn[name], cfg, reveal, seed, options.workers, tick)
+            took = time.monotonic() - started
+            log(f"{name}: {len(sets[name])} windows from {len(drawn[name])} floors in {took:.0f} s")
+        net, history = fit(sets["train"], sets["val"], cfg, options, log, net=net)
+    if walked["train"] and options.walk_epochs:
+        frame = (options.walk_height, options.walk_width)
+        for name in HOUSE_SPLITS:
+            started = time.monotonic()
+
+            def step(done: int, total: int, name: str = name) -> None:
+                if done == total or done % 100 == 0:
+                    log(f"walking {name} floors: {done}/{total}")
+
+            jobs = [WalkJob(src, n, options.seed + 1, frame, cfg) for src, n in walked[name]]
+            walks[name] = walk_floors(jobs, options.workers, step)
+            log(f"{name}: {len(walks[name])} choices from {len(jobs)} floors in {time.monotonic() - started:.0f} s")
+        if not len(walks["train"]):
+            raise L3MVNError("the walks gave no choice among two or more frontiers to learn from")
+        net, walk_history = fit_walks(net, walks["train"], walks["val"], cfg, options, log)
+    scores: dict[str, dict[str, float]] = {
+        name: evaluate(net, sets[name], cfg) for name in ("val", "test") if name in sets and len(sets[name])
+    }
+    scores |= {
+        f"walks_{name}": choice_regret(net, walks[name], cfg)
+        for name in ("val", "test")
+        if name in walks and len(walks[name])
+    }
+    houses = {
+        name: sorted(set(sets[name].houses if name in sets else []) | set(walks[name].houses if name in walks else []))
+        for name in HOUSE_SPLITS
+    }
     training = {
         "dataset": str(dataset) if dataset else None,
         "split": split,
-        "houses": {name: sorted({h for h in sets[name].houses}) for name in sets if name != "train"},
-        "gibson_train_floors": len(sources["train"]),
+        "init": str(init) if init is not None else None,
+        "houses": {name: h for name, h in houses.items() if name != "train"},
+        "gibson_train_floors": len(gibson_sources(dataset, split, 1)["train"]) if dataset else 0,
         "options": asdict(options),
         "reveal": asdict(reveal),
         "history": history,
+        "walk_history": walk_history,
         "scores": scores,
     }
     model = PotentialModel(net, {k: float(getattr(cfg, k)) for k in GEOMETRY}, training, str(out))
     model.save(out)
-    return {"out": str(out), "scores": scores, "windows": {k: len(v) for k, v in sets.items()}}
+    counts = {k: len(v) for k, v in sets.items()} | {f"walks_{k}": len(v) for k, v in walks.items()}
+    return {"out": str(out), "scores": scores, "windows": counts}
+
+
+def _procedural_seed(options: TrainOptions, k: int) -> int:
+    return options.seed * 100_000 + k
 
 
 # --- the command (registered by l3mvn.run.cli as `l3mvn poni`) ------------------------------------------
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="poni_command", required=True)
-    tr = sub.add_parser("train", help="train the potential network from full house maps (no interaction)")
+    tr = sub.add_parser(
+        "train", help="train the potential network from full house maps, then on a prior-free agent's choices"
+    )
     tr.add_argument("--dataset", default=None, help="SemExp dataset dir (its houses split train / val / test)")
     tr.add_argument("--split", default="train")
     tr.add_argument("--out", default=None, help="the .pt to write (default: the shipped checkpoint)")
     defaults = TrainOptions()
-    for name in ("samples_per_floor", "procedural_houses", "samples_per_procedural", "epochs", "batch", "width"):
+    counts = ("samples_per_floor", "procedural_houses", "samples_per_procedural", "epochs", "batch", "width")
+    walk_counts = ("walk_episodes", "walk_procedural_houses", "walk_episodes_per_procedural", "walk_epochs")
+    for name in counts + walk_counts:
         tr.add_argument(f"--{name.replace('_', '-')}", type=_count, default=getattr(defaults, name))
-    tr.add_argument("--learning-rate", type=float, default=defaults.learning_rate)
+    for name in ("learning_rate", "walk_learning_rate", "walk_tau_m"):
+        tr.add_argument(f"--{name.replace('_', '-')}", type=float, default=getattr(defaults, name))
+    tr.add_argument(
+        "--init", default=None, help="start from this checkpoint's weights (e.g. to run the walks' stage alone)"
+    )
     tr.add_argument("--seed", type=int, default=defaults.seed)
     tr.add_argument("--workers", type=_count, default=defaults.workers)
     show = sub.add_parser("show", help="what a checkpoint was trained on and how it scored")
@@ -307,13 +518,16 @@ def run(args: argparse.Namespace) -> int:
     )
     if options.epochs < 1 or options.batch < 1 or options.width < 8 or options.width % 8:
         raise L3MVNError("--epochs and --batch must be >= 1, --width a multiple of 8 (its group norm)")
-    if not (math.isfinite(options.learning_rate) and options.learning_rate > 0):
-        raise L3MVNError(f"--learning-rate must be a positive number, got {options.learning_rate}")
+    for name in ("learning_rate", "walk_learning_rate", "walk_tau_m"):
+        value = getattr(options, name)
+        if not (math.isfinite(value) and value > 0):
+            raise L3MVNError(f"--{name.replace('_', '-')} must be a positive number, got {value}")
     summary = train_potentials(
         args.dataset,
         args.split,
         args.out or shipped_checkpoint(),
         options=options,
+        init=args.init,
         log=lambda line: print(line, flush=True),
     )
     print(json.dumps(summary))
