@@ -492,6 +492,7 @@ def test_eval_refuses_a_broken_checkpoint_once_before_any_episode(tmp_path, caps
 def test_poni_trains_shows_and_runs_an_episode_from_the_command_line(tmp_path, capsys, monkeypatch):
     checkpoint = tmp_path / "p.pt"
     argv = ["--procedural-houses", "3", "--samples-per-procedural", "2", "--epochs", "1", "--width", "8"]
+    argv += ["--walk-procedural-houses", "0"]  # the first stage alone (test_potential_walks runs both)
     assert main(["poni", "train", *argv, "--workers", "1", "--out", str(checkpoint)]) == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert summary["out"] == str(checkpoint) and summary["windows"]["train"] >= 1
