@@ -56,7 +56,7 @@ class TrainOptions:
     learning_rate: float = 2e-3
     width: int = 16  # the U-Net's first layer; each halving doubles it
     seed: int = 0
-    workers: int = 2  # processes drawing samples
+    workers: int = 2  # processes drawing windows and walking
     # The second stage: the agent's own choices (``walks``), fine-tuning the first stage's net.
     walk_episodes: int = 12  # episodes walked per Gibson floor (train, val and test houses)
     walk_procedural_houses: int = 1000
