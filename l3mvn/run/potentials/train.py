@@ -181,6 +181,31 @@ def evaluate(net: PotentialNet, data: SampleSet, cfg: PotentialConfig, batch: in
     }
 
 
+class _Epochs:
+    """A training stage's epochs: each row reported as it comes, with the val scores when there are
+    any, and the weights of the epoch whose val ``regret_m`` is least kept to restore."""
+
+    def __init__(self, progress: Callable[[str], None] | None) -> None:
+        self.progress = progress
+        self.history: list[dict[str, float]] = []
+        self.best: tuple[float, dict[str, torch.Tensor]] | None = None
+
+    def add(self, net: PotentialNet, row: dict[str, float], val: dict[str, float] | None) -> None:
+        if val is not None:
+            row.update({f"val_{k}": v for k, v in val.items() if k not in ("windows", "choices")})
+            if self.best is None or row["val_regret_m"] < self.best[0]:
+                self.best = (row["val_regret_m"], {k: v.detach().clone() for k, v in net.state_dict().items()})
+        self.history.append(row)
+        if self.progress:
+            self.progress(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in row.items()}))
+
+    def best_net(self, net: PotentialNet) -> tuple[PotentialNet, list[dict[str, float]]]:
+        if self.best is not None:
+            net.load_state_dict(self.best[1])
+        net.eval()
+        return net, self.history
+
+
 def fit(
     train: SampleSet,
     val: SampleSet,
@@ -199,8 +224,7 @@ def fit(
     opt = torch.optim.AdamW(net.parameters(), lr=options.learning_rate, weight_decay=1e-4)
     steps = options.epochs * max(1, len(train) // options.batch)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=options.learning_rate, total_steps=steps)
-    history: list[dict[str, float]] = []
-    best: tuple[float, dict[str, torch.Tensor]] | None = None
+    epochs = _Epochs(progress)
     for epoch in range(options.epochs):
         net.train()
         order = rng.permutation(len(train))
@@ -215,18 +239,8 @@ def fit(
             sched.step()
             total += loss.item()
         row = {"epoch": epoch + 1, "train_loss": total / batches, "seconds": time.monotonic() - started}
-        if len(val):
-            row.update({f"val_{k}": v for k, v in evaluate(net, val, cfg).items() if k != "windows"})
-            score = row["val_regret_m"]
-            if best is None or score < best[0]:
-                best = (score, {k: v.detach().clone() for k, v in net.state_dict().items()})
-        history.append(row)
-        if progress:
-            progress(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in row.items()}))
-    if best is not None:
-        net.load_state_dict(best[1])
-    net.eval()
-    return net, history
+        epochs.add(net, row, evaluate(net, val, cfg) if len(val) else None)
+    return epochs.best_net(net)
 
 
 # --- the second stage: the choices of the agent's own walks ------------------------------------------------
@@ -320,8 +334,7 @@ def fit_walks(
     sched = torch.optim.lr_scheduler.OneCycleLR(
         opt, max_lr=options.walk_learning_rate, total_steps=options.walk_epochs * batches
     )
-    history: list[dict[str, float]] = []
-    best: tuple[float, dict[str, torch.Tensor]] | None = None
+    epochs = _Epochs(progress)
     for epoch in range(options.walk_epochs + 1):
         started, total = time.monotonic(), 0.0
         if epoch:
@@ -339,18 +352,8 @@ def fit_walks(
         row: dict[str, float] = {"walk_epoch": epoch, "seconds": time.monotonic() - started}
         if epoch:
             row["train_loss"] = total / batches
-        if len(val):
-            row.update({f"val_{k}": v for k, v in choice_regret(net, val, cfg).items() if k != "choices"})
-            score = row["val_regret_m"]
-            if best is None or score < best[0]:
-                best = (score, {k: v.detach().clone() for k, v in net.state_dict().items()})
-        history.append(row)
-        if progress:
-            progress(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in row.items()}))
-    if best is not None:
-        net.load_state_dict(best[1])
-    net.eval()
-    return net, history
+        epochs.add(net, row, choice_regret(net, val, cfg) if len(val) else None)
+    return epochs.best_net(net)
 
 
 def _turned(net: PotentialNet, x: torch.Tensor, rng: np.random.Generator) -> torch.Tensor:
