@@ -8,7 +8,9 @@ L3MVN_SCREENSHOTS=DIR to keep the screenshot (docs/screenshots/dashboard_languag
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -51,6 +53,22 @@ def _step_to_first_choice(page, ctl, first: str):
     return view
 
 
+@contextlib.contextmanager
+def _language_page(url: str) -> Iterator:
+    """A chromium page on the dashboard at ``url``, its canvas drawn, with the long timeout a first
+    language-model load needs; the browser closes on leaving."""
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        try:
+            page = browser.new_page(viewport=VIEWPORT)
+            page.set_default_timeout(60_000)
+            page.goto(url)
+            page.wait_for_selector("canvas", timeout=20_000)
+            yield page
+        finally:
+            browser.close()
+
+
 @pytest.fixture(scope="module")
 def dash():
     yield from serve_dashboard(episodes_per_house=2, policy="l3mvn-zs", cfg=Config().with_frame(240, 320))
@@ -59,53 +77,45 @@ def dash():
 def test_the_language_folder_shows_bars_and_the_fusion_rule_of_the_choice(dash, tmp_path):
     shots = Path(os.environ.get("L3MVN_SCREENSHOTS", tmp_path))
     ctl = dash.controller
-    with sync_api.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        try:
-            page = browser.new_page(viewport=VIEWPORT)
-            page.set_default_timeout(60_000)
-            page.goto(dash.url)
-            page.wait_for_selector("canvas", timeout=20_000)
-            _wait(
-                lambda: "scores frontiers with a prior" in _panel_text(page),
-                timeout=20,
-                what="the Language folder's note before the first choice",
-            )
+    with _language_page(dash.url) as page:
+        _wait(
+            lambda: "scores frontiers with a prior" in _panel_text(page),
+            timeout=20,
+            what="the Language folder's note before the first choice",
+        )
 
-            view = _step_to_first_choice(page, ctl, "step 0 (the language model loads once)")
-            line = view.fusion.describe()
-            assert line.startswith("bound B = [0.15, 0.30]; max S_LLM")
-            _wait(lambda: line in _panel_text(page), what="the fusion rule line with the snapshot's numbers")
+        view = _step_to_first_choice(page, ctl, "step 0 (the language model loads once)")
+        line = view.fusion.describe()
+        assert line.startswith("bound B = [0.15, 0.30]; max S_LLM")
+        _wait(lambda: line in _panel_text(page), what="the fusion rule line with the snapshot's numbers")
 
-            panel = page.get_by_text("Fusion rule").first
-            panel.scroll_into_view_if_needed()
-            text = _panel_text(page)
-            chosen = next(f for f in view.frontiers if f.chosen)
-            assert f"★ F{chosen.id} (chosen)" in text and f"{view.target} (target)" in text
-            query = chosen.queries.get(view.target)
-            assert query is None or query in text
-            # The target's bar ringed on every shown card; the chosen card first, its bar as long as its p.
-            bars = page.locator(f'span[data-goal="{view.target}"]')
-            assert bars.count() == min(len(view.frontiers), SHOWN_FRONTIERS)
-            assert "solid" in bars.first.evaluate("e => getComputedStyle(e).outlineStyle")
-            width = bars.first.evaluate("e => e.getBoundingClientRect().width")
-            assert width == pytest.approx(BAR_PX * chosen.llm_scores[view.target], abs=1.0)
-            assert page.locator("span[data-goal]").count() == 6 * bars.count()  # every goal on every card
-            for folder in ("Camera", "Frontiers"):  # folded, so the screenshot shows the Language folder whole
-                page.get_by_text(folder, exact=True).first.click()
-            page.get_by_text("Language", exact=True).first.evaluate("e => e.scrollIntoView({block: 'start'})")
-            page.wait_for_timeout(500)
-            page.screenshot(path=str(shots / "dashboard_language_panel.png"))
+        panel = page.get_by_text("Fusion rule").first
+        panel.scroll_into_view_if_needed()
+        text = _panel_text(page)
+        chosen = next(f for f in view.frontiers if f.chosen)
+        assert f"★ F{chosen.id} (chosen)" in text and f"{view.target} (target)" in text
+        query = chosen.queries.get(view.target)
+        assert query is None or query in text
+        # The target's bar ringed on every shown card; the chosen card first, its bar as long as its p.
+        bars = page.locator(f'span[data-goal="{view.target}"]')
+        assert bars.count() == min(len(view.frontiers), SHOWN_FRONTIERS)
+        assert "solid" in bars.first.evaluate("e => getComputedStyle(e).outlineStyle")
+        width = bars.first.evaluate("e => e.getBoundingClientRect().width")
+        assert width == pytest.approx(BAR_PX * chosen.llm_scores[view.target], abs=1.0)
+        assert page.locator("span[data-goal]").count() == 6 * bars.count()  # every goal on every card
+        for folder in ("Camera", "Frontiers"):  # folded, so the screenshot shows the Language folder whole
+            page.get_by_text(folder, exact=True).first.click()
+        page.get_by_text("Language", exact=True).first.evaluate("e => e.scrollIntoView({block: 'start'})")
+        page.wait_for_timeout(500)
+        page.screenshot(path=str(shots / "dashboard_language_panel.png"))
 
-            ctl.set_policy("cost-utility")
-            page.get_by_role("button", name="Reset").click()
-            _wait(
-                lambda: "cost-utility uses no prior" in _panel_text(page),
-                timeout=30,
-                what="the note of a policy without language",
-            )
-        finally:
-            browser.close()
+        ctl.set_policy("cost-utility")
+        page.get_by_role("button", name="Reset").click()
+        _wait(
+            lambda: "cost-utility uses no prior" in _panel_text(page),
+            timeout=30,
+            what="the note of a policy without language",
+        )
 
 
 @pytest.fixture(scope="module")
@@ -116,36 +126,28 @@ def poni_dash():
 def test_the_language_folder_shows_ponis_potentials_like_a_language_models_scores(poni_dash, tmp_path):
     shots = Path(os.environ.get("L3MVN_SCREENSHOTS", tmp_path))
     ctl = poni_dash.controller
-    with sync_api.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        try:
-            page = browser.new_page(viewport=VIEWPORT)
-            page.set_default_timeout(60_000)
-            page.goto(poni_dash.url)
-            page.wait_for_selector("canvas", timeout=20_000)
-            _wait(
-                lambda: "poni scores frontiers with a prior" in _panel_text(page),
-                timeout=20,
-                what="the Language folder's note before the first choice",
-            )
-            view = _step_to_first_choice(page, ctl, "step 0")
-            assert view.fusion.rule == "potentials" and view.fusion.scorer.startswith("poni (poni.pt)")
-            line = view.fusion.describe()
-            assert line.startswith("PONI: least metres to the frontier")
-            _wait(lambda: line in _panel_text(page), what="PONI's rule line with the snapshot's numbers")
-            text = _panel_text(page)
-            chosen = next(f for f in view.frontiers if f.chosen)
-            assert f"★ F{chosen.id} (chosen)" in text and "object potential PONI predicts" in text
-            assert f"potential {chosen.s_llm:.2f}" in text
-            assert "S_LLM" not in text  # the Frontiers table names its column "potential" too
-            assert all(f.label.startswith(f"F{f.id}  pot ") for f in view.frontiers)  # and the map's labels
-            metres = chosen.expected_m[view.target]
-            assert f"{chosen.llm_scores[view.target]:.2f} {metres:.1f} m" in text  # the bar's value and its metres
-            assert page.locator("span[data-goal]").count() % 6 == 0 and page.locator("span[data-goal]").count() >= 6
-            for folder in ("Camera", "Frontiers"):
-                page.get_by_text(folder, exact=True).first.click()
-            page.get_by_text("Language", exact=True).first.evaluate("e => e.scrollIntoView({block: 'start'})")
-            page.wait_for_timeout(500)
-            page.screenshot(path=str(shots / "dashboard_poni_panel.png"))
-        finally:
-            browser.close()
+    with _language_page(poni_dash.url) as page:
+        _wait(
+            lambda: "poni scores frontiers with a prior" in _panel_text(page),
+            timeout=20,
+            what="the Language folder's note before the first choice",
+        )
+        view = _step_to_first_choice(page, ctl, "step 0")
+        assert view.fusion.rule == "potentials" and view.fusion.scorer.startswith("poni (poni.pt)")
+        line = view.fusion.describe()
+        assert line.startswith("PONI: least metres to the frontier")
+        _wait(lambda: line in _panel_text(page), what="PONI's rule line with the snapshot's numbers")
+        text = _panel_text(page)
+        chosen = next(f for f in view.frontiers if f.chosen)
+        assert f"★ F{chosen.id} (chosen)" in text and "object potential PONI predicts" in text
+        assert f"potential {chosen.s_llm:.2f}" in text
+        assert "S_LLM" not in text  # the Frontiers table names its column "potential" too
+        assert all(f.label.startswith(f"F{f.id}  pot ") for f in view.frontiers)  # and the map's labels
+        metres = chosen.expected_m[view.target]
+        assert f"{chosen.llm_scores[view.target]:.2f} {metres:.1f} m" in text  # the bar's value and its metres
+        assert page.locator("span[data-goal]").count() % 6 == 0 and page.locator("span[data-goal]").count() >= 6
+        for folder in ("Camera", "Frontiers"):
+            page.get_by_text(folder, exact=True).first.click()
+        page.get_by_text("Language", exact=True).first.evaluate("e => e.scrollIntoView({block: 'start'})")
+        page.wait_for_timeout(500)
+        page.screenshot(path=str(shots / "dashboard_poni_panel.png"))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -310,6 +311,14 @@ def test_a_missing_unreadable_or_foreign_checkpoint_is_refused_in_one_line(tmp_p
         changed = {k: v for k, v in {**blob, **change}.items() if v is not None}
         torch.save(changed, tmp_path / name)
         assert says in _one_line_error(PotentialModel.load, tmp_path / name, SMALL), name
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full to stand for a full disk")
+def test_a_checkpoint_that_cannot_be_written_is_one_error_and_leaves_no_part_file(tmp_path):
+    assert "PONI checkpoint" in _one_line_error(_model().save, "/dev/full")
+    (tmp_path / "poni.pt").mkdir()  # a folder where the file should go
+    assert "poni.pt" in _one_line_error(_model().save, tmp_path / "poni.pt")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["poni.pt"]
 
 
 # --- the policy ---------------------------------------------------------------------------------------------

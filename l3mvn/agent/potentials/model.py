@@ -21,6 +21,7 @@ from l3mvn.agent.potentials.features import CHANNELS, OUTPUTS
 from l3mvn.core.config import PotentialConfig
 from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.core.paths import PACKAGE_DATA
+from l3mvn.core.writing import replacing
 
 GEOMETRY = ("cell_m", "input_window_m", "range_m", "area_scale_m2")  # the PotentialConfig fields a checkpoint fixes
 
@@ -118,7 +119,8 @@ class PotentialModel:
             "geometry": dict(self.geometry),
             "training": self.training,
         }
-        torch.save(blob, Path(path))
+        with replacing(path, "PONI checkpoint") as fh:  # whole or not at all: a full disk is one error
+            torch.save(blob, fh)
 
     @property
     def label(self) -> str:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack
@@ -393,6 +394,8 @@ def train_potentials(
         raise L3MVNError(f"--out must be a .pt file, got {out}")
     if not out.parent.is_dir():
         raise L3MVNError(f"--out: folder {out.parent} does not exist")
+    if not os.access(out.parent, os.W_OK | os.X_OK):  # found now, not after the training
+        raise L3MVNError(f"--out: no permission to write in {out.parent}")
     start = PotentialModel.load(init, cfg) if init is not None else None
     net = start.net if start is not None else PotentialNet(width=options.width)
     options = replace(options, width=net.width)
