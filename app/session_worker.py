@@ -447,9 +447,13 @@ class DashboardController:
         policy, and the Head only where that scorer reads one (a head elsewhere is refused or ignored)."""
         scorer = self._scorer_of(policy)
         p = self.cfg.policy
+        headed = scorer == HEAD_SCORER
         chosen = self.cfg.replace(
             policy=replace(
-                p, scorer=scorer if self.scorer else p.scorer, head=p.head if scorer == HEAD_SCORER else None
+                p,
+                scorer=scorer if self.scorer else p.scorer,
+                head=p.head if headed else None,
+                embedder=p.embedder if headed else None,
             )
         )
         return with_scorer(policy, chosen)  # as `l3mvn eval` hashes it: the scorer in force written in
@@ -462,7 +466,7 @@ class DashboardController:
             return False
         have = self._runner.config
         if self._scorer_of(policy) is None:
-            have = have.replace(policy=replace(have.policy, head=cfg.policy.head))
+            have = have.replace(policy=replace(have.policy, head=cfg.policy.head, embedder=cfg.policy.embedder))
         return have == cfg
 
     def _set_busy(self, text: str) -> None:

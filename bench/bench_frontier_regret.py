@@ -2,6 +2,7 @@
 
     python bench/bench_frontier_regret.py --dataset DIR [--split train] [--workers 2] [--limit N]
         [--houses held-out | --houses A B ...] [--only LABEL ...] [--poni CHECKPOINT.pt ...]
+        [--heads HEAD.pt ...]
 
 ``--houses held-out`` keeps the houses ``house_split`` puts on the test side: the frontier-trained
 head never saw them (neither in training nor in choosing its checkpoint).
@@ -16,7 +17,8 @@ scores 0 by construction.
 
 Reported per policy: mean regret in metres overall and per goal, and how often its choice differs from
 cost-utility's. ``--only`` runs some candidates (cost-utility always, the reference of the last
-column); ``--poni`` adds PONI with each checkpoint given.
+column); ``--poni`` adds PONI with each checkpoint given, ``--heads`` l3mvn-ff with each feed-forward
+head file given (from ``l3mvn train-head``; a frontier head both by the bound rule and ``expected``).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from l3mvn.agent.language import GOALS  # noqa: E402
 from l3mvn.agent.language.frontier_head import house_split  # noqa: E402
+from l3mvn.agent.language.head import load_head  # noqa: E402
 from l3mvn.agent.policies.oracle_frontier import frontier_goal_distances  # noqa: E402
 from l3mvn.core.config import Config, PolicyConfig, PotentialConfig  # noqa: E402
 from l3mvn.run.registry import make_policy  # noqa: E402
@@ -65,12 +68,19 @@ CANDIDATES = [
 _STATE: dict = {}
 
 
-def _candidates(only: list[str] | None, poni: list[str]) -> list[tuple[str, str, PolicyConfig, PotentialConfig]]:
+def _candidates(
+    only: list[str] | None, poni: list[str], heads: list[str]
+) -> list[tuple[str, str, PolicyConfig, PotentialConfig]]:
     chosen = [
         (label, name, opts, PotentialConfig())
         for label, name, opts in CANDIDATES
         if only is None or label in only or label == "cost-utility"
     ]
+    for head in heads:
+        chosen.append((f"l3mvn-ff {Path(head).name}", "l3mvn-ff", PolicyConfig(head=head), PotentialConfig()))
+        if load_head(head)[1].get("kind", "").startswith("frontiers"):
+            options = PolicyConfig(head=head, selection="expected")
+            chosen.append((f"l3mvn-ff {Path(head).name} expected", "l3mvn-ff", options, PotentialConfig()))
     return chosen + [(f"poni {Path(c).name}", "poni", PolicyConfig(), PotentialConfig(checkpoint=c)) for c in poni]
 
 
@@ -128,8 +138,9 @@ def main() -> None:
     labels = [label for label, _, _ in CANDIDATES]
     parser.add_argument("--only", nargs="+", default=None, choices=labels, help="these candidates only")
     parser.add_argument("--poni", nargs="+", default=[], help="PONI checkpoints to add as candidates")
+    parser.add_argument("--heads", nargs="+", default=[], help="feed-forward head files to add as l3mvn-ff candidates")
     args = parser.parse_args()
-    chosen_candidates = _candidates(args.only, args.poni)
+    chosen_candidates = _candidates(args.only, args.poni, args.heads)
     eset = load_episode_set(args.dataset, args.split, cfg=Config().with_frame(120, 160))
     chosen = list(range(len(eset.episodes)))
     if args.houses == ["held-out"]:

@@ -9,6 +9,7 @@ on few rooms. Reference line: a Bernoulli naive Bayes fitted on the ``train`` bu
     python bench/bench_language_auc.py --scorers mlm causal --mlm-model /path/roberta-large
     python bench/bench_language_auc.py --scorers llm --filters entropy --llm-models smollm2-135m gemma3-270m \
         --llm-prompts paper contrastive
+    python bench/bench_language_auc.py --scorers feedforward --embedders minilm smollm2-135m   # Emb(W)
 """
 
 from __future__ import annotations
@@ -86,6 +87,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--causal-model", default="gpt2-large")
     ap.add_argument("--llm-models", nargs="+", default=["smollm2-135m"], help="llm scorer: models to compare")
     ap.add_argument("--llm-prompts", nargs="+", default=["paper"], help="llm scorer: prompts to compare")
+    ap.add_argument(
+        "--embedders", nargs="+", default=["minilm"], help="feedforward scorer: the room heads' embedders to compare"
+    )
     ap.add_argument("--split", default="test", choices=["val", "test"])
     args = ap.parse_args(argv)
 
@@ -112,6 +116,8 @@ def main(argv: list[str] | None = None) -> int:
             variants += [
                 (f"llm {m} {p}", name, {"model": m, "prompt": p}) for m in args.llm_models for p in args.llm_prompts
             ]
+        elif name == "feedforward":
+            variants += [(f"{name} {e}", name, {"model": e}) for e in args.embedders]
         else:
             variants.append((name, name, {}))
     for label, name, extra in variants:

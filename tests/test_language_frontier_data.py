@@ -161,8 +161,22 @@ def test_resume_keeps_finished_episodes_and_drops_a_block_cut_off(tmp_path):
         )
         + "\n"
     )
-    finished, keep = read_done(path)
-    assert finished == {("H/0/0", 0)} and len(keep) == 2
+    finished, houses, keep = read_done(path)
+    assert finished == {("H/0/0", 0)} and houses == set() and len(keep) == 2
+
+
+def test_resume_drops_a_procedural_house_until_all_its_episodes_are_done(tmp_path):
+    path = tmp_path / "f.jsonl"
+    row = {"house": "P", "episode": "P/0/0", "seed": 0, "goal": "bed", "mapped": [], "frontiers": []}
+    lines = [
+        json.dumps(row),
+        json.dumps({"done": "P/0/0", "seed": 0, "choices": 1, "procedural": 7, "of": 2}),
+        json.dumps(row | {"house": "Q", "episode": "Q/0/0"}),
+        json.dumps({"done": "Q/0/0", "seed": 0, "choices": 1, "procedural": 8, "of": 1}),
+    ]
+    path.write_text("\n".join(lines) + "\n")
+    finished, houses, keep = read_done(path)
+    assert houses == {(8, 0)} and finished == {("Q/0/0", 0)} and keep == lines[2:]
 
 
 def test_a_malformed_frontier_file_is_one_line_error(tmp_path):
@@ -206,3 +220,34 @@ def test_generation_is_deterministic_for_a_seed_and_resumes_where_it_stopped(tin
         generate_frontier_data(str(tiny_dataset), "val", tmp_path / "c.jsonl", houses=["Nowhere"])
     with pytest.raises(L3MVNError, match="cannot walk frontier data.*valid: .*cost-utility"):
         generate_frontier_data(str(tiny_dataset), "val", tmp_path / "c.jsonl", policy="oracle-frontier")
+
+
+def test_procedural_houses_are_walked_beside_a_dataset_and_resume_by_house(tiny_dataset, tmp_path):
+    from l3mvn.run.eval.frontier_data import generate_frontier_data
+
+    first, second = tmp_path / "a.jsonl", tmp_path / "b.jsonl"
+    kw = {"houses": ["Tiny"], "limit": 1, "procedural_houses": 2, "procedural_seed": 3, "episodes_per_procedural": 2}
+    summary = generate_frontier_data(str(tiny_dataset), "val", first, **kw)
+    choices = load_choices(first)
+    assert {c.house for c in choices} == {"Tiny", "procedural-0003", "procedural-0004"}
+    assert summary["houses"] == 3
+    lines = first.read_text().splitlines()
+    ends = [json.loads(line) for line in lines if '"done"' in line]
+    assert [e.get("procedural") for e in ends] == [None, 3, 3, 4, 4] and {e.get("of") for e in ends[1:]} == {2}
+    # Cut off after the last house's first episode: resume walks that whole house again, to the same bytes.
+    cut = max(i for i, line in enumerate(lines) if '"done"' in line and '"procedural": 4' not in line)
+    second.write_text("\n".join(lines[: cut + 2]) + "\n")
+    calls = []
+    generate_frontier_data(
+        str(tiny_dataset), "val", second, resume=True, progress=lambda d, t: calls.append((d, t)), **kw
+    )
+    assert second.read_text() == first.read_text() and calls[-1] == (1, 1)
+    alone = tmp_path / "p.jsonl"
+    generate_frontier_data(None, "val", alone, procedural_houses=1, procedural_seed=3)
+    assert alone.read_text().splitlines() == [line for line in lines if '"procedural-0003' in line]
+    with pytest.raises(L3MVNError, match="nothing to walk: give --dataset, --procedural-houses"):
+        generate_frontier_data(None, "val", tmp_path / "c.jsonl")
+    with pytest.raises(L3MVNError, match="--houses picks houses of --dataset"):
+        generate_frontier_data(None, "val", tmp_path / "c.jsonl", houses=["Tiny"], procedural_houses=1)
+    with pytest.raises(L3MVNError, match="--episodes-per-procedural >= 1"):
+        generate_frontier_data(None, "val", tmp_path / "c.jsonl", procedural_houses=1, episodes_per_procedural=0)

@@ -96,3 +96,39 @@ def test_rooms_head_keeps_the_paper_recipe():
     assert scorer.kind == "rooms" and not scorer.predicts_distance and scorer.object_filter == "entropy"
     with pytest.raises(L3MVNError, match="predicts p\\(goal\\), not distances"):
         scorer.expected_distance([("sink",)])
+
+
+def test_a_head_file_reads_the_embedder_it_names_and_refuses_another(head_file, tmp_path):
+    from l3mvn.core.config import PolicyConfig
+
+    scorer = make_scorer("feedforward", head=str(head_file))
+    assert scorer.model_name == "minilm" and scorer.label == "feedforward (frontiers head on minilm)"
+    assert make_scorer("feedforward", head=str(head_file), model="all-MiniLM-L6-v2").model_name == "minilm"
+    with pytest.raises(L3MVNError, match="reads 'minilm' embeddings, not 'smollm2-135m'") as err:
+        make_scorer("feedforward", head=str(head_file), model="smollm2-135m")
+    assert "\n" not in str(err.value)
+    with pytest.raises(L3MVNError, match="no shipped head of kind 'frontiers' for embedder 'gemma3-270m'"):
+        make_scorer("feedforward", head="frontiers", model="gemma3-270m")
+    with pytest.raises(L3MVNError, match="reads a bag of objects"):
+        make_scorer("feedforward", head="rooms-bag", model="minilm")
+    assert PolicyConfig(head=str(head_file)).head == str(head_file)
+    with pytest.raises(L3MVNError, match=r"or a head file \(\*\.pt"):
+        PolicyConfig(head=str(tmp_path / "head.json"))
+    with pytest.raises(L3MVNError, match="policy.embedder must name"):
+        PolicyConfig(embedder=" ")
+
+
+def test_the_embedder_reaches_only_the_feed_forward_scorer(head_file, capsys):
+    from l3mvn.core.config import PolicyConfig
+    from l3mvn.run.cli import main
+    from l3mvn.run.registry import check_options
+
+    policy = LanguageFrontierPolicy("l3mvn-ff", "feedforward", head=str(head_file), embedder="minilm")
+    assert policy.scorer.model_name == "minilm"
+    with pytest.raises(L3MVNError, match="the embedder 'minilm' applies to the feedforward scorer only"):
+        LanguageFrontierPolicy("l3mvn-zs", "roomtype", embedder="minilm")
+    with pytest.raises(L3MVNError, match="--embedder applies to the feedforward scorer only; policy 'cost-utility'"):
+        check_options("cost-utility", PolicyConfig(embedder="minilm"))
+    argv = ["eval", "--policy", "l3mvn-ff", "--houses", "1", "--episodes-per-house", "1"]
+    assert main(argv + ["--head", "frontiers", "--embedder", "gemma3-270m"]) == 2
+    assert "no shipped head of kind 'frontiers' for embedder 'gemma3-270m'" in capsys.readouterr().err

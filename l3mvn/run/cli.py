@@ -187,10 +187,17 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     )
     ev.add_argument(
         "--head",
-        choices=HEAD_KINDS,
         default=None,
-        help=f"feed-forward scorer: head trained on frontiers of house maps or on room lists; "
-        f"-bag: the same on a bag of objects, without the language model (default {DEFAULT_HEAD})",
+        metavar="KIND|FILE",
+        help=f"feed-forward scorer: head trained on frontiers of house maps or on room lists ({', '.join(HEAD_KINDS)}; "
+        f"-bag: the same on a bag of objects, without the language model; default {DEFAULT_HEAD}), or a head "
+        "file from `l3mvn train-head`",
+    )
+    ev.add_argument(
+        "--embedder",
+        default=None,
+        help="feed-forward scorer: the sentence embedder (Emb(W)) whose head to read: minilm (default) or an LLM "
+        "(smollm2-135m, gemma3-270m, a .gguf file); a head file reads the embedder it was trained on",
     )
     ev.add_argument(
         "--llm",
@@ -329,7 +336,11 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
         "-bag: the same on a bag of objects, without the language model",
     )
     th.add_argument("--data", nargs="+", default=None, help="--head frontiers: frontier-data file(s)")
-    th.add_argument("--model", default="minilm", help="sentence embedder: minilm (shipped) or a HF name/path")
+    th.add_argument(
+        "--model",
+        default="minilm",
+        help="sentence embedder: minilm (shipped), an LLM (smollm2-135m, gemma3-270m, a .gguf file) or a HF name/path",
+    )
     th.add_argument("--out", default=None, help="where to save the head (default: the shipped file for minilm)")
     th.add_argument("--gibson-rooms", default=None)
     th.add_argument("--epochs", type=_positive, default=None, help="default: 80 (frontiers), 60 (rooms)")
@@ -562,6 +573,7 @@ def _cmd_eval(args: argparse.Namespace) -> int:
             selection=args.selection,
             seg_noise=args.seg_noise,
             head=args.head,
+            embedder=args.embedder,
             llm=args.llm,
             llm_prompt=args.prompt,
         ),

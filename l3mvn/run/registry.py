@@ -26,10 +26,10 @@ from functools import cache
 from l3mvn.agent.modular import MapAgent
 from l3mvn.agent.modular.teleop import TeleopAgent
 from l3mvn.agent.policies.global_policies import CostUtility, GlobalPolicy, NearestFrontier, RandomSample
-from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
+from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy, shared_scorer
 from l3mvn.agent.policies.oracle_frontier import FrontierOracle
 from l3mvn.core.config import Config, PolicyConfig, PotentialConfig
-from l3mvn.core.config.policy import LLM_SCORER
+from l3mvn.core.config.policy import HEAD_SCORER, LLM_SCORER
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.plugins import discover
 from l3mvn.run.session import Policy
@@ -108,6 +108,7 @@ def _language(name: str, language: Language) -> Callable[[PolicyContext], Policy
             p.head,
             ctx.config.frontiers.cu_lambda,
             (p.llm, p.llm_prompt),
+            p.embedder,
         )
 
     return _map_agent(policy)
@@ -133,6 +134,18 @@ def _potential_model(checkpoint: str | None, cfg: PotentialConfig):  # -> Potent
     from l3mvn.agent.potentials import PotentialModel
 
     return PotentialModel.load(checkpoint, cfg)
+
+
+def _head_ready(name: str) -> Callable[[Config], None]:
+    """Where policy ``name`` scores with the feed-forward scorer, load its head and embedder once:
+    an unknown head file or an embedder without a head is one line before any episode runs."""
+
+    def ready(config: Config) -> None:
+        p = config.policy
+        if scorer_of(name, p) == HEAD_SCORER:
+            shared_scorer(HEAD_SCORER, p.head, embedder=p.embedder)
+
+    return ready
 
 
 def _poni_ready(config: Config) -> None:
@@ -198,18 +211,21 @@ BUILT_IN: tuple[PolicySpec, ...] = (
         _language("l3mvn-zs", _ZERO_SHOT),
         "zero-shot language scores fused with cost-utility (the paper's L3MVN-ZS)",
         language=_ZERO_SHOT,
+        ready=_head_ready("l3mvn-zs"),
     ),
     PolicySpec(
         "l3mvn-ff",
         _language("l3mvn-ff", _FEED_FORWARD),
         "the feed-forward head's scores fused with cost-utility (the paper's L3MVN-FF)",
         language=_FEED_FORWARD,
+        ready=_head_ready("l3mvn-ff"),
     ),
     PolicySpec(
         "near+llm",
         _language("near+llm", _NEAR_FEED_FORWARD),
         "the feed-forward head's scores fused with the nearest frontier (the paper's Table II)",
         language=_NEAR_FEED_FORWARD,
+        ready=_head_ready("near+llm"),
     ),
     PolicySpec(
         "exp",
@@ -223,6 +239,7 @@ BUILT_IN: tuple[PolicySpec, ...] = (
         "= l3mvn-ff (the paper's Table II name)",
         language=_FEED_FORWARD,
         same_as="l3mvn-ff",
+        ready=_head_ready("l3mvn-ff"),
     ),
     PolicySpec(TELEOP, _teleop, "the map-based agent driven by hand in the dashboard", driven=True),
 )
@@ -346,6 +363,11 @@ def check_options(name: str, options: PolicyConfig) -> None:
         raise L3MVNError(
             f"--llm and --prompt apply to the {LLM_SCORER} scorer only; policy {name!r} scores with "
             f"{scorer_of(name, options) or 'no language model'} (add --scorer {LLM_SCORER})"
+        )
+    if options.embedder is not None and scorer_of(name, options) != HEAD_SCORER:
+        raise L3MVNError(
+            f"--embedder applies to the {HEAD_SCORER} scorer only; policy {name!r} scores with "
+            f"{scorer_of(name, options) or 'no language model'}"
         )
     if not spec.map_based and options.seg_noise:
         raise L3MVNError(f"--seg-noise applies to map-based policies; {name!r} does not read the semantic frames")

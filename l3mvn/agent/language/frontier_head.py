@@ -138,8 +138,13 @@ def expected_choice(pred: torch.Tensor, lists: RankingLists) -> torch.Tensor:
 
 def _predict(head: GoalHead, table: torch.Tensor, lists: RankingLists) -> torch.Tensor:
     """(L, F) predicted metres to each list's goal."""
-    out: torch.Tensor = head(table)  # all unique sentences at once: BatchNorm sees the whole vocabulary
-    per = out[lists.sentence]  # (L, F, G)
+    # Each sentence the lists hold, once: BatchNorm sees the batch's vocabulary, and the cost of a step
+    # grows with the batch, not with every sentence of thousands of houses.
+    used, inverse = torch.unique(lists.sentence, return_inverse=True)
+    if head.training and len(used) < 2:  # BatchNorm needs two rows to train on
+        used, inverse = torch.arange(len(table)), lists.sentence
+    out: torch.Tensor = head(table[used])
+    per = out[inverse]  # (L, F, G)
     return per.gather(2, lists.goal[:, None, None].expand(-1, per.shape[1], 1))[..., 0]
 
 
@@ -194,7 +199,7 @@ def train_frontier_head(
     key = FRONTIER_HEAD_KIND + BAG if bag else f"{model.lower()}-{FRONTIER_HEAD_KIND}"
     if out is None:
         if key not in SHIPPED_HEADS:
-            raise L3MVNError(f"pass --out for embedder {model!r} (only minilm has a shipped path)")
+            raise L3MVNError(f"pass --out for embedder {model!r} (shipped heads: {', '.join(SHIPPED_HEADS)})")
         out = SHIPPED_HEADS[key]
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # tiny matrices: a second thread only waits for a shared CPU

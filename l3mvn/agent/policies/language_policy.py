@@ -57,18 +57,25 @@ def _predicts_distance(scorer: Scorer) -> TypeGuard[_DistanceScorer]:
     return bool(getattr(scorer, "predicts_distance", False))
 
 
-def shared_scorer(name: str, head: str | None = None, llm: tuple[str, str] | None = None) -> Scorer:
+def shared_scorer(
+    name: str, head: str | None = None, llm: tuple[str, str] | None = None, embedder: str | None = None
+) -> Scorer:
     """One scorer per process, name and options: models load once and the (object set, goal) cache is
-    shared across episodes, where the same object sets keep recurring. ``head`` applies to the
-    feed-forward scorer only, ``llm`` (model, prompt) to the llm scorer only."""
-    if head is not None and name != HEAD_SCORER:
-        raise L3MVNError(f"a head ({head!r}) applies to the {HEAD_SCORER} scorer only, not {name!r}")
+    shared across episodes, where the same object sets keep recurring. ``head`` and ``embedder`` apply
+    to the feed-forward scorer only, ``llm`` (model, prompt) to the llm scorer only."""
+    _refuse_head_options(name, head, embedder)
     options: tuple[tuple[str, str], ...] = ()
-    if head is not None:
-        options = (("head", head),)
+    if name == HEAD_SCORER:
+        options = tuple((k, v) for k, v in (("head", head), ("model", embedder)) if v is not None)
     elif name == LLM_SCORER and llm is not None:
         options = (("model", llm[0]), ("prompt", llm[1]))
     return _shared_scorer(name, options)
+
+
+def _refuse_head_options(scorer: str, head: str | None, embedder: str | None) -> None:
+    for option, value in (("head", head), ("embedder", embedder)):
+        if value is not None and scorer != HEAD_SCORER:
+            raise L3MVNError(f"the {option} {value!r} applies to the {HEAD_SCORER} scorer only, not {scorer!r}")
 
 
 @lru_cache(maxsize=4)
@@ -92,6 +99,7 @@ class LanguageFrontierPolicy:
         head: str | None = None,
         cu_lambda: float = FrontierConfig.cu_lambda,
         llm: tuple[str, str] = (PolicyConfig.llm, PolicyConfig.llm_prompt),
+        embedder: str | None = None,
     ) -> None:
         if selection not in SELECTIONS:
             raise L3MVNError(f"unknown selection {selection!r}; valid: {', '.join(SELECTIONS)}")
@@ -99,17 +107,17 @@ class LanguageFrontierPolicy:
             raise L3MVNError(f"unknown exploration score {exploration!r}; valid: cost-utility, nearest")
         self.name, self.scorer_name = name, scorer
         self.exploration, self.selection, self.paradigm = exploration, selection, paradigm
-        if head is not None and scorer != HEAD_SCORER:
-            raise L3MVNError(f"a head ({head!r}) applies to the {HEAD_SCORER} scorer only, not {scorer!r}")
+        _refuse_head_options(scorer, head, embedder)
         if selection == "expected" and not cu_lambda > 0:
             raise L3MVNError(
                 f"selection 'expected' needs frontiers.cu_lambda > 0 (cost-utility in metres), got {cu_lambda}"
             )
-        self.bound, self.head, self.cu_lambda, self.llm = bound, head, cu_lambda, llm
+        self.bound, self.head, self.cu_lambda, self.llm, self.embedder = bound, head, cu_lambda, llm, embedder
         self.scorer = self._make(scorer)
 
     def _make(self, scorer: str) -> Scorer:
-        made = shared_scorer(scorer, self.head if scorer == HEAD_SCORER else None, self.llm)
+        reads_head = scorer == HEAD_SCORER
+        made = shared_scorer(scorer, self.head if reads_head else None, self.llm, self.embedder if reads_head else None)
         if self.selection == "expected" and not getattr(made, "predicts_distance", False):
             raise L3MVNError(
                 f"selection 'expected' needs a scorer that predicts distances (feedforward with "

@@ -19,6 +19,7 @@ SELECTIONS = ("paper", "official_code", "expected")
 # (the ablation that says what MiniLM adds; l3mvn/data/language/MODEL_CARD.md).
 HEAD_KINDS = ("frontiers", "rooms", "frontiers-bag", "rooms-bag")
 DEFAULT_HEAD = "rooms"
+HEAD_FILE_SUFFIX = ".pt"
 HEAD_SCORER = "feedforward"  # the one language scorer that reads a head
 # The generative LM behind the ``llm`` scorer (l3mvn.agent.language.llm): a named model or a .gguf
 # path, and the prompt it reads (l3mvn.agent.language.scorers.llm).
@@ -35,15 +36,23 @@ class PolicyConfig:
     bound_low: float = 0.15
     bound_high: float = 0.30
     seg_noise: float = 0.0  # map-based policies: perception errors (see l3mvn.agent.perception)
-    head: str | None = None  # feed-forward scorer: a head kind instead of DEFAULT_HEAD
+    head: str | None = None  # feed-forward scorer: a head kind instead of DEFAULT_HEAD, or a head file (.pt)
+    # ... and the sentence embedder whose head it reads (Emb(W)): minilm, or an LLM (a named one or a
+    # .gguf file) embedding the sentence itself; None: minilm, or the embedder a head file names.
+    embedder: str | None = None
     llm: str = "smollm2-135m"  # the llm scorer's model: a named model or a .gguf file
     llm_prompt: str = "contrastive"  # ... and its prompt (LLM_PROMPTS; the one that ranked best offline)
 
     def __post_init__(self) -> None:
         if self.selection not in SELECTIONS:
             raise L3MVNError(f"unknown selection {self.selection!r}; valid: {', '.join(SELECTIONS)}")
-        if self.head is not None and self.head not in HEAD_KINDS:
-            raise L3MVNError(f"unknown feed-forward head {self.head!r}; valid: {', '.join(HEAD_KINDS)}")
+        if self.head is not None and self.head not in HEAD_KINDS and not self.head.endswith(HEAD_FILE_SUFFIX):
+            raise L3MVNError(
+                f"unknown feed-forward head {self.head!r}; valid: {', '.join(HEAD_KINDS)} or a head file "
+                f"(*{HEAD_FILE_SUFFIX}, from `l3mvn train-head`)"
+            )
+        if self.embedder is not None and not self.embedder.strip():
+            raise L3MVNError("policy.embedder must name a sentence embedder (minilm, smollm2-135m, ...) or be unset")
         if not 0.0 <= self.bound_low < self.bound_high <= 1.0:
             raise L3MVNError(
                 f"the bound must satisfy 0 <= bound_low < bound_high <= 1, got {self.bound_low}, {self.bound_high}"

@@ -7,10 +7,16 @@ geometry) and, from the task layer, the ground-truth geodesic from the frontier 
 instance of *every* goal category present in the house (the frontier oracle's criterion, so one
 walk labels six choices). The ground truth only goes into the file; the agent never reads it.
 
+The houses are a dataset's (real maps), procedural houses (``--procedural-houses``: unlimited
+training houses furnished from real room contents), or both; a house's name decides its side of the
+train / val / test split wherever the file is read, so the two kinds mix freely.
+
 File: JSON lines. A choice line is ``{"house", "floor", "episode", "seed", "goal", "step", "mapped"
 (every category on the agent's map), "frontiers": [...]}``; after each episode's choices one
-``{"done": episode, "seed", "choices"}`` line. An episode is written in one ``write`` when it ends,
-so ``resume`` keeps every episode with its ``done`` line and drops a block cut off by a kill.
+``{"done": episode, "seed", "choices"}`` line, which for a procedural house also names the house's
+seed and how many episodes it has (``"procedural", "of"``). A job (one dataset episode, or every
+episode of one procedural house) is written in one ``write`` when it ends, so ``resume`` keeps every
+finished job and drops a block cut off by a kill.
 Episodes are seeded by id (``MapAgent.reset``), so a seed gives the same file whatever the worker
 count or the order of runs.
 """
@@ -41,6 +47,8 @@ from l3mvn.world.baselines import object_distances
 from l3mvn.world.datasets import EpisodeSet, load_episode_set
 from l3mvn.world.episode import Episode
 from l3mvn.world.episodes import generate_episodes
+from l3mvn.world.scenes.procedural import generate_house
+from l3mvn.world.scenes.scene import SceneMap
 from l3mvn.world.scenes.semexp import load_split
 from l3mvn.world.task.regions import GoalRegion
 
@@ -49,15 +57,17 @@ DEFAULT_FRAME = (120, 160)  # the regret bench's: the map, not the pixels, is wh
 
 @dataclass(frozen=True)
 class FrontierDataJob:
-    """One episode to walk: the dataset source, the episode's index in its set, the seed and policy."""
+    """One job: one episode of a dataset (``index`` into its episode set), or (``house_seed`` given)
+    every generated episode of one procedural house; walked with ``seed`` by ``policy``."""
 
-    dataset: str
+    dataset: str | None
     split: str
     index: int
     seed: int
     policy: str
     frame: tuple[int, int]
     episodes_per_house: int | None
+    house_seed: int | None = None
 
 
 def window_object_distances(frontier: Frontier, sem_map: SemanticMap, half_cells: int) -> dict[str, float]:
@@ -127,30 +137,37 @@ def _episode_set(dataset: str, split: str, cfg: Config, per_house: int | None):
     return EpisodeSet(Path(dataset).resolve().name, split, scenes, episodes)
 
 
-def _walk(job: FrontierDataJob) -> tuple[str, int, list[dict]]:
-    """Walk one episode; returns (episode key, seed, choice records)."""
-    key = (job.dataset, job.split, job.frame, job.episodes_per_house)
-    if _STATE.get("key") != key:
-        cfg = Config().with_frame(*job.frame)
-        _STATE.update(
-            key=key,
-            cfg=cfg,
-            eset=_episode_set(job.dataset, job.split, cfg, job.episodes_per_house),
-            runners={},
-            fields={},
-        )
-    cfg, eset = _STATE["cfg"], _STATE["eset"]
-    ep = eset.episodes[job.index]
+def _walk(job: FrontierDataJob) -> list[tuple[str, int, list[dict]]]:
+    """Walk the job's episodes; returns (episode key, seed, choice records) per episode."""
+    if _STATE.get("frame") != job.frame:
+        _STATE.update(frame=job.frame, cfg=Config().with_frame(*job.frame), runners={}, fields={}, dataset=None)
+    cfg = _STATE["cfg"]
+    if job.house_seed is not None:
+        scene = generate_house(job.house_seed)
+        try:
+            episodes = generate_episodes(scene, job.episodes_per_house or 1, seed=0, cfg=cfg)
+        except L3MVNError:  # a house whose goals no start reaches in range: nothing to walk there
+            episodes = []
+    else:
+        key = (job.dataset, job.split, job.episodes_per_house)
+        if _STATE.get("dataset") != key:
+            assert job.dataset is not None  # a job without a house seed walks a dataset's episode
+            _STATE.update(dataset=key, eset=_episode_set(job.dataset, job.split, cfg, job.episodes_per_house))
+        episodes = [_STATE["eset"].episodes[job.index]]
+        scene = _STATE["eset"].scene_of(episodes[0])
     runner = _STATE["runners"].setdefault(job.seed, Runner(cfg, seed=job.seed, config_hash="frontier-data"))
-    scene = eset.scene_of(ep)
     floor = runner.floor(scene)
     if scene.key not in _STATE["fields"]:
         present = [g for g in GOALS if g in scene.categories and scene.category_mask(g).any()]
         _STATE["fields"] = {scene.key: {g: object_distances(floor.task, g) for g in present}}  # one house at a time
-    fields = _STATE["fields"][scene.key]
-    session = runner.session(scene, job.policy)
+    return [(ep.key, job.seed, _walk_episode(runner, scene, ep, job.seed, job.policy)) for ep in episodes]
+
+
+def _walk_episode(runner: Runner, scene: SceneMap, ep: Episode, seed: int, policy: str) -> list[dict]:
+    session = runner.session(scene, policy)
     session.start(ep)
-    half = cfg.frontiers.window_cells(cfg.map.resolution_m)
+    fields = _STATE["fields"][scene.key]
+    half = runner.config.frontiers.window_cells(runner.config.map.resolution_m)
     rows = []
     for step, decision in session.frontier_choices():
         frontiers, sem_map = decision.frontiers, decision.map
@@ -165,21 +182,22 @@ def _walk(job: FrontierDataJob) -> tuple[str, int, list[dict]]:
                 "house": ep.scene,
                 "floor": ep.floor,
                 "episode": ep.key,
-                "seed": job.seed,
+                "seed": seed,
                 "goal": ep.goal,
                 "step": step,
                 "mapped": mapped,
                 "frontiers": label_frontiers(frontiers, sem_map, fields, half),
             }
         )
-    return ep.key, job.seed, rows
+    return rows
 
 
-def read_done(path: Path) -> tuple[set[tuple[str, int | None]], list[str]]:
-    """(finished (episode, seed) pairs, the lines to keep): the lines of an episode without its
-    ``done`` line, and a last line cut off mid-write, are dropped."""
+def read_done(path: Path) -> tuple[set[tuple[str, int | None]], set[tuple[int, int | None]], list[str]]:
+    """(finished (episode, seed) pairs, finished (procedural house seed, seed) pairs, the lines to
+    keep): the lines of an episode without its ``done`` line, of a procedural house with fewer
+    ``done`` lines than its episodes, and a last line cut off mid-write, are dropped."""
     if not path.exists():
-        return set(), []
+        return set(), set(), []
     lines = path.read_text().splitlines()
     rows = []
     for n, line in enumerate(lines):
@@ -190,13 +208,27 @@ def read_done(path: Path) -> tuple[set[tuple[str, int | None]], list[str]]:
                 raise L3MVNError(f"{path}:{n + 1}: not a JSON line; not a frontier-data file?") from None
             row = None
         rows.append(row if isinstance(row, dict) else {})
-    done = {(r["done"], r.get("seed")) for r in rows if "done" in r}
+    finished = [r for r in rows if "done" in r]
+    walked: dict[tuple[int, int | None], int] = {}
+    for r in finished:
+        if "procedural" in r:
+            walked[(r["procedural"], r.get("seed"))] = walked.get((r["procedural"], r.get("seed")), 0) + 1
+    houses = {
+        (r["procedural"], r.get("seed"))
+        for r in finished
+        if "procedural" in r and walked[(r["procedural"], r.get("seed"))] == r.get("of")
+    }
+    done = {
+        (r["done"], r.get("seed"))
+        for r in finished
+        if "procedural" not in r or (r["procedural"], r.get("seed")) in houses
+    }
     keep = [line for line, r in zip(lines, rows) if (r.get("done", r.get("episode")), r.get("seed")) in done]
-    return done, keep
+    return done, houses, keep
 
 
 def generate_frontier_data(
-    dataset: str,
+    dataset: str | None,
     split: str,
     out: str | Path,
     *,
@@ -205,13 +237,18 @@ def generate_frontier_data(
     policy: str = "cost-utility",
     episodes_per_house: int | None = None,
     limit: int | None = None,
+    procedural_houses: int = 0,
+    procedural_seed: int = 0,
+    episodes_per_procedural: int = 2,
     workers: int = 1,
     frame: tuple[int, int] = DEFAULT_FRAME,
     resume: bool = False,
     progress: Callable[[int, int], None] | None = None,
 ) -> dict:
-    """Walk every (episode, seed) of the split (only ``houses`` if given, the first ``limit`` episodes
-    per house if given) and append its choices to ``out``; returns counts of what the file holds."""
+    """Walk every (episode, seed) of the dataset's split (only ``houses`` if given, the first
+    ``limit`` episodes per house if given), then ``episodes_per_procedural`` generated episodes on
+    each of ``procedural_houses`` procedural houses (seeds from ``procedural_seed``), and append
+    their choices to ``out``; returns counts of what the file holds."""
 
     def walks(spec: PolicySpec) -> bool:  # a map agent that reads no language model and no ground truth
         return spec.map_based and spec.language is None and not spec.ground_truth and not spec.driven
@@ -227,32 +264,46 @@ def generate_frontier_data(
         raise L3MVNError(f"seeds must be one or more integers >= 0, got {list(seeds)}")
     if workers < 1 or (limit is not None and limit < 1) or (episodes_per_house is not None and episodes_per_house < 1):
         raise L3MVNError("workers, --limit and --episodes-per-house must be >= 1")
+    if procedural_houses < 0 or procedural_seed < 0 or episodes_per_procedural < 1:
+        raise L3MVNError(
+            "--procedural-houses and --procedural-seed must be >= 0 and --episodes-per-procedural >= 1, got "
+            f"{procedural_houses}, {procedural_seed}, {episodes_per_procedural}"
+        )
+    if dataset is None and not procedural_houses:
+        raise L3MVNError("nothing to walk: give --dataset, --procedural-houses N, or both")
+    if dataset is None and houses:
+        raise L3MVNError("--houses picks houses of --dataset; give --dataset too")
     cfg = Config().with_frame(*frame)
-    eset = _episode_set(str(dataset), split, cfg, episodes_per_house)
-    known = sorted(eset.scenes)
-    if houses:
-        unknown = sorted(set(houses) - set(known))
+    indices: list[int] = []
+    eset = None if dataset is None else _episode_set(str(dataset), split, cfg, episodes_per_house)
+    if eset is not None:
+        known = sorted(eset.scenes)
+        unknown = sorted(set(houses or ()) - set(known))
         if unknown:
             raise L3MVNError(f"unknown house(s) {', '.join(unknown)}; valid: {', '.join(known)}")
-    indices: list[int] = []
-    per_house: dict[str, int] = {}
-    for i, ep in enumerate(eset.episodes):
-        if houses and ep.scene not in houses:
-            continue
-        per_house[ep.scene] = per_house.get(ep.scene, 0) + 1
-        if limit is None or per_house[ep.scene] <= limit:
-            indices.append(i)
+        per_house: dict[str, int] = {}
+        for i, ep in enumerate(eset.episodes):
+            if houses and ep.scene not in houses:
+                continue
+            per_house[ep.scene] = per_house.get(ep.scene, 0) + 1
+            if limit is None or per_house[ep.scene] <= limit:
+                indices.append(i)
     out = Path(out)
-    done, keep = read_done(out) if resume else (set(), [])
+    done, houses_done, keep = read_done(out) if resume else (set(), set(), [])
     if not resume and out.exists() and out.stat().st_size:
         raise L3MVNError(f"{out} exists; pass --resume to continue it or choose another --out")
     write_file(out, "".join(line + "\n" for line in keep), "--out")
-    height, width = frame
+    source = None if dataset is None else str(dataset)
     jobs = [
-        FrontierDataJob(str(dataset), split, i, s, policy, (height, width), episodes_per_house)
+        FrontierDataJob(source, split, i, s, policy, frame, episodes_per_house)
         for s in seeds
         for i in indices
-        if (eset.episodes[i].key, s) not in done
+        if eset is not None and (eset.episodes[i].key, s) not in done
+    ] + [
+        FrontierDataJob(None, split, 0, s, policy, frame, episodes_per_procedural, house_seed=procedural_seed + k)
+        for s in seeds
+        for k in range(procedural_houses)
+        if (procedural_seed + k, s) not in houses_done
     ]
     total, finished = len(jobs), 0
     if progress:
@@ -261,10 +312,16 @@ def generate_frontier_data(
         pool = None if workers == 1 else get_context("forkserver").Pool(workers)
         try:
             results = map(_walk, jobs) if pool is None else pool.imap(_walk, jobs)
-            for key, seed, rows in results:
-                block = [json.dumps(r, separators=(",", ":")) for r in rows]
-                block.append(json.dumps({"done": key, "seed": seed, "choices": len(rows)}))
-                _append(fh, "\n".join(block) + "\n", out)
+            for job, walked in zip(jobs, results):
+                block = []
+                for key, seed, rows in walked:
+                    block += [json.dumps(r, separators=(",", ":")) for r in rows]
+                    end = {"done": key, "seed": seed, "choices": len(rows)}
+                    if job.house_seed is not None:  # a house counts as walked once all its episodes are
+                        end |= {"procedural": job.house_seed, "of": len(walked)}
+                    block.append(json.dumps(end))
+                if block:
+                    _append(fh, "\n".join(block) + "\n", out)
                 finished += 1
                 if progress:
                     progress(finished, total)
@@ -300,7 +357,7 @@ def summarise(path: str | Path) -> dict:
 
 # --- the command (registered by l3mvn.run.cli under `l3mvn language frontier-data`) ----------------------
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--dataset", required=True, help="SemExp dataset dir (episodes are generated if it has none)")
+    parser.add_argument("--dataset", default=None, help="SemExp dataset dir (episodes are generated if it has none)")
     parser.add_argument("--split", default="train")
     parser.add_argument("--out", required=True, help="JSON-lines file to write (or continue with --resume)")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="agent seeds; each walks every episode")
@@ -313,6 +370,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="generate N episodes per floor instead of reading the dataset's",
     )
     parser.add_argument("--limit", type=int, default=None, help="only the first N episodes of each house")
+    parser.add_argument(
+        "--procedural-houses", type=int, default=0, help="also walk N procedural houses (with or without --dataset)"
+    )
+    parser.add_argument("--procedural-seed", type=int, default=0, help="seed of the first procedural house")
+    parser.add_argument(
+        "--episodes-per-procedural", type=int, default=2, help="generated episodes per procedural house (default 2)"
+    )
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--resume", action="store_true", help="skip (episode, seed) pairs already in --out")
 
@@ -337,6 +401,9 @@ def run(args: argparse.Namespace) -> int:
             policy=args.policy,
             episodes_per_house=args.episodes_per_house,
             limit=args.limit,
+            procedural_houses=args.procedural_houses,
+            procedural_seed=args.procedural_seed,
+            episodes_per_procedural=args.episodes_per_procedural,
             workers=args.workers,
             resume=args.resume,
             progress=progress,

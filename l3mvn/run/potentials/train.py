@@ -43,7 +43,7 @@ from l3mvn.agent.potentials.model import GEOMETRY
 from l3mvn.core.config import PotentialConfig
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.potentials.samples import NO_LABEL, HouseTruth, RevealOptions, Source, source_scene
-from l3mvn.run.potentials.walks import WalkJob, WalkSet, walk_floors
+from l3mvn.run.potentials.walks import WALKERS, WalkJob, WalkSet, walk_floors
 from l3mvn.world.scenes.semexp import load_split
 
 
@@ -67,6 +67,7 @@ class TrainOptions:
     walk_tau_m: float = 1.0  # the listwise loss's temperature over total metres
     walk_height: int = 120  # the walks' frame: the map, not the pixels, is what the network reads
     walk_width: int = 160
+    walker: str = WALKERS[0]  # who walks (walks.WALKERS): poni walks with the --init checkpoint
 
 
 @dataclass
@@ -396,6 +397,10 @@ def train_potentials(
         raise L3MVNError(f"--out: folder {out.parent} does not exist")
     if not os.access(out.parent, os.W_OK | os.X_OK):  # found now, not after the training
         raise L3MVNError(f"--out: no permission to write in {out.parent}")
+    if options.walker not in WALKERS:
+        raise L3MVNError(f"unknown walker {options.walker!r}; valid: {', '.join(WALKERS)}")
+    if options.walker == "poni" and init is None:
+        raise L3MVNError("--walker poni walks with the checkpoint it fine-tunes: give --init CHECKPOINT")
     start = PotentialModel.load(init, cfg) if init is not None else None
     net = start.net if start is not None else PotentialNet(width=options.width)
     options = replace(options, width=net.width)
@@ -442,7 +447,8 @@ def train_potentials(
                 if done == total or done % 100 == 0:
                     log(f"walking {name} floors: {done}/{total}")
 
-            jobs = [WalkJob(src, n, options.seed + 1, frame, cfg) for src, n in walked[name]]
+            walking = replace(cfg, checkpoint=str(init)) if options.walker == "poni" else cfg
+            jobs = [WalkJob(src, n, options.seed + 1, frame, walking, options.walker) for src, n in walked[name]]
             walks[name] = walk_floors(jobs, options.workers, step)
             log(f"{name}: {len(walks[name])} choices from {len(jobs)} floors in {time.monotonic() - started:.0f} s")
         if not len(walks["train"]):
@@ -500,6 +506,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         tr.add_argument(f"--{name.replace('_', '-')}", type=float, default=getattr(defaults, name))
     tr.add_argument(
         "--init", default=None, help="start from this checkpoint's weights (e.g. to run the walks' stage alone)"
+    )
+    tr.add_argument(
+        "--walker",
+        choices=WALKERS,
+        default=defaults.walker,
+        help="who walks the second stage's episodes: cost-utility (no prior), or poni with the --init checkpoint",
     )
     tr.add_argument("--seed", type=int, default=defaults.seed)
     tr.add_argument("--workers", type=_count, default=defaults.workers)

@@ -2,11 +2,14 @@
 
 Windows drawn from full house maps (``samples``) teach the potentials everywhere on a revealed edge;
 the policy, though, chooses among the few frontiers the agent's frontier extraction keeps, read on the
-agent's own map. Here a map agent that reads no prior (cost-utility) walks generated episodes on a
-floor; at each re-selection the sample is its map's window around it, and every frontier it chose
-among, with its travel cost, the network cells it is read at, and the ground-truth geodesic metres
-from it to the nearest instance of every goal the house holds (the frontier oracle's reading, so one
-walk labels six choices). The ground truth only enters the labels; the agent never reads it.
+agent's own map. Here a map agent walks generated episodes on a floor: one that reads no prior
+(cost-utility), or PONI itself with the checkpoint being fine-tuned, whose own choices lead it to maps
+the prior-free walker never draws (the states a policy trained on another's walks meets and was never
+taught: learning on its own visits is the remedy imitation learning calls DAgger). At each
+re-selection the sample is its map's window around it, and every frontier it chose among, with its
+travel cost, the network cells it is read at, and the ground-truth geodesic metres from it to the
+nearest instance of every goal the house holds (the frontier oracle's reading, so one walk labels six
+choices). The ground truth only enters the labels; the agent never reads it.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from l3mvn.run.runner import Runner
 from l3mvn.world.baselines import object_distances
 from l3mvn.world.episodes import generate_episodes
 
-WALKING_POLICY = "cost-utility"  # reads no prior and no ground truth: the choices any prior faces
+WALKERS = ("cost-utility", "poni")  # read no ground truth: cost-utility no prior, poni its checkpoint
 
 
 @dataclass
@@ -85,26 +88,31 @@ class WalkSet:
 
 @dataclass(frozen=True)
 class WalkJob:
+    """``walker`` (one of ``WALKERS``) walks ``episodes`` generated episodes of ``source``; PONI walks
+    with ``potentials.checkpoint``."""
+
     source: Source
     episodes: int
     seed: int
     frame: tuple[int, int]
     potentials: PotentialConfig
+    walker: str = WALKERS[0]
 
 
-_RUNNERS: dict[tuple[int, int], Runner] = {}  # one per worker process and frame, floors kept warm
+# One per worker process, frame, walker and its potentials (floors kept warm).
+_RUNNERS: dict[tuple[tuple[int, int], str, PotentialConfig], Runner] = {}
 
 
 def walk_floor(job: WalkJob) -> WalkSet:
     """Walk ``job.episodes`` generated episodes of one floor and keep every re-selection among two
     or more frontiers; an empty set where the floor gives no episode."""
     scene = source_scene(job.source)
-    cfg = Config().with_frame(*job.frame)
+    cfg = Config().with_frame(*job.frame).replace(poni=job.potentials)
     cells = job.potentials.window_cells
     episodes = generate_episodes(scene, job.episodes, seed=job.seed, cfg=cfg)
     if not episodes:
         return WalkSet.join([], cells)
-    runner = _RUNNERS.setdefault(job.frame, Runner(cfg, config_hash="poni-walks"))
+    runner = _RUNNERS.setdefault((job.frame, job.walker, job.potentials), Runner(cfg, config_hash="poni-walks"))
     floor = runner.floor(scene)
     fields = {
         g: object_distances(floor.task, g)
@@ -113,7 +121,7 @@ def walk_floor(job: WalkJob) -> WalkSet:
     }
     features, goals, choices, costs, metres, cell_lists = [], [], [], [], [], []
     for episode in episodes:
-        session = runner.session(scene, WALKING_POLICY)
+        session = runner.session(scene, job.walker)
         session.start(episode)
         for _, decision in session.frontier_choices():
             frontiers, sem_map = decision.frontiers, decision.map

@@ -15,6 +15,10 @@ Four heads share that architecture (``HEAD_KINDS``, chosen with ``head=``, a kin
   language model. No sentence is written and the embedder is never imported or loaded; the query
   shown for a frontier is the bag itself ("bag of objects: ..."), the only thing the head reads.
 
+The embedder (Emb(W)) is MiniLM, as in the paper's code, or the generative LLM itself
+(``model="smollm2-135m"``: the mean of its last hidden states over the sentence); a head is trained
+for one embedder and its file names it.
+
 One forward per unique object set gives all six outputs; they fill six cache entries.
 """
 
@@ -35,7 +39,7 @@ from l3mvn.agent.language.head import (
     is_bag,
     load_head,
 )
-from l3mvn.agent.language.models import MINILM, load_sentence_encoder
+from l3mvn.agent.language.models import MINILM, load_sentence_encoder, resolve
 from l3mvn.agent.language.queries import feedforward_query
 from l3mvn.agent.language.scorers.base import ObjectKey, Scorer, register
 from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS
@@ -49,17 +53,25 @@ class FeedForwardScorer(Scorer):
 
     @property
     def label(self) -> str:
-        return f"{self.name} ({self.kind} head)"
+        if self.model_name is None:
+            return f"{self.name} ({self.kind} head)"
+        return f"{self.name} ({self.kind} head on {self.model_name})"
 
-    def __init__(self, model: str = MINILM, head: str | Path | None = None, **kw: Any) -> None:
+    def __init__(self, model: str | None = None, head: str | Path | None = None, **kw: Any) -> None:
+        """``model``: the sentence embedder (Emb(W)) whose head to read, minilm or an LLM; None reads
+        minilm's shipped heads, or the embedder a head file was trained on."""
         super().__init__(**kw)
         head = DEFAULT_HEAD if head is None else head
         if isinstance(head, str) and head in HEAD_KINDS:
-            key = head if is_bag(head) else model.lower() if head == "rooms" else f"{model.lower()}-{head}"
+            if is_bag(head) and model is not None:
+                raise L3MVNError(f"the {head} head reads a bag of objects, not sentence embeddings: drop {model!r}")
+            embedder = (model or MINILM).lower()
+            key = head if is_bag(head) else embedder if head == "rooms" else f"{embedder}-{head}"
             if key not in SHIPPED_HEADS:
                 raise L3MVNError(
-                    f"no shipped head of kind {head!r} for embedder {model!r} (shipped: {', '.join(SHIPPED_HEADS)}); "
-                    "train one with `l3mvn train-head --model ...` and pass head=<file>"
+                    f"no shipped head of kind {head!r} for embedder {embedder!r} "
+                    f"(shipped: {', '.join(SHIPPED_HEADS)}); train one with `l3mvn train-head --model ...` "
+                    "and pass its file"
                 )
             head = SHIPPED_HEADS[key]
         elif isinstance(head, str) and not Path(head).exists():
@@ -75,19 +87,24 @@ class FeedForwardScorer(Scorer):
         # A bag head reads its vocabulary's multi-hot vector: no sentence encoder is loaded at all.
         self.vocabulary: tuple[str, ...] | None = None
         self.encoder = None
+        self.model_name: str | None = None
         if self.meta.get("features") == BAG_FEATURES:
+            if model is not None:
+                raise L3MVNError(f"head {head} reads a bag of objects, not sentence embeddings: drop {model!r}")
             self.vocabulary = tuple(self.meta.get("vocabulary", ()))
             if len(self.vocabulary) != self.head.in_dim:
                 raise L3MVNError(
                     f"head {head}: a vocabulary of {len(self.vocabulary)} objects for a {self.head.in_dim}-d input"
                 )
-            self.model_name = None
         else:
-            self.model_name = model
-            self.encoder = load_sentence_encoder(model)
+            trained_on = str(self.meta.get("encoder", MINILM))
+            if model is not None and resolve(model) != resolve(trained_on):
+                raise L3MVNError(f"head {head} reads {trained_on!r} embeddings, not {model!r}: give {trained_on!r}")
+            self.model_name = trained_on
+            self.encoder = load_sentence_encoder(trained_on)
             if self.encoder.dim != self.head.in_dim:
                 raise L3MVNError(
-                    f"head {head} expects {self.head.in_dim}-d embeddings; {model!r} gives {self.encoder.dim}"
+                    f"head {head} expects {self.head.in_dim}-d embeddings; {trained_on!r} gives {self.encoder.dim}"
                 )
         self._metres: dict[ObjectKey, np.ndarray] = {}
 
