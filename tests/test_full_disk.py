@@ -100,7 +100,7 @@ def test_export_to_a_full_disk_is_an_error_and_leaves_no_partial_video(full, rec
     _, rec = recorded
     [recording] = rec.glob("*.rrd")
     line = _one_error_line(_cli("export", str(full / "v.mp4"), "--recording", str(recording), "--height", "160"))
-    assert "cannot write video" in line and str(full / "v.mp4") in line
+    assert "cannot write video" in line and str(full / "v.mp4") in line and "No space left on device" in line
     assert _left(full) == []
 
 

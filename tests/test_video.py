@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import logging
 import re
 import sys
 
+import av
 import cv2
 import numpy as np
 import pytest
@@ -17,7 +19,8 @@ from l3mvn.core.errors import L3MVNError
 from l3mvn.run.eval.result_videos import add_export_arguments, export_result_video, result_video_name, run_export
 from l3mvn.run.events import EventBus
 from l3mvn.run.recording import Recorder, read_recording
-from l3mvn.run.recording.drawing import PANEL_BG, VideoOptions, frames
+from l3mvn.run.recording import video as video_module
+from l3mvn.run.recording.drawing import PANEL_BG, FrameGeometry, VideoOptions, frames
 from l3mvn.run.recording.recorded import read_episode
 from l3mvn.run.recording.video import export_video
 from l3mvn.run.runner import Runner
@@ -101,6 +104,83 @@ def test_each_step_frame_shows_that_steps_map_and_camera(recorded, tmp_path):
     assert max(np.abs(a.astype(int) - b).mean() for a, b in zip(decoded, drawn)) < 6  # what was drawn, per step
     first, last = drawn[0][:240, 326:].astype(int), drawn[-1][:240, 326:].astype(int)
     assert np.abs(last - first).mean() > 5  # the map panel shows the map of its own step
+
+
+def _probe(path):
+    """(container format, codec, RGB frames) as PyAV, the library that wrote it, reads ``path``."""
+    with av.open(str(path)) as container:
+        codec = container.streams.video[0].codec_context.name
+        decoded = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+        return container.format.name, codec, decoded
+
+
+def test_the_video_is_h264_in_mp4_with_its_index_first_and_shows_what_was_drawn(recorded, tmp_path):
+    """Issue 34 item 1: H.264 plays in every browser; mp4v (MPEG-4 Part 2) did not."""
+    path, _ = recorded
+    ep = read_episode(path)
+    options = VideoOptions(fps=5, height=240, title_s=0.4)
+    video = export_video(path, tmp_path / "ep.mp4", options)
+    assert video.path == tmp_path / "ep.mp4" and video.codec == "h264"
+    container, codec, decoded = _probe(video.path)
+    assert "mp4" in container.split(",") and codec == "h264"
+    assert len(decoded) == video.frames == 2 + len(ep.steps)
+    data = video.path.read_bytes()
+    assert 0 < data.find(b"moov") < data.find(b"mdat")  # faststart: a browser can play before the whole file is in
+    drawn = list(frames(ep, options, title_frames=0))
+    errors = [np.abs(a.astype(int) - b).mean() for a, b in zip(decoded[2:], drawn)]
+    assert max(errors) < 4  # lossy, but each frame is the one drawn for its step
+    assert np.abs(decoded[2].astype(int) - drawn[-1]).mean() > 3 * errors[0]  # and not any other step's
+
+
+def test_without_libx264_the_video_is_vp9_in_webm_and_says_so_in_one_line(recorded, tmp_path, monkeypatch, caplog):
+    path, _ = recorded
+    monkeypatch.setattr(video_module, "h264_available", lambda: False)
+    with caplog.at_level(logging.WARNING, logger=video_module.__name__):
+        video = export_video(path, tmp_path / "ep.mp4", VideoOptions(height=160))
+    assert video.path == tmp_path / "ep.webm" and video.codec == "vp9"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ep.webm"]
+    container, codec, decoded = _probe(video.path)
+    assert "webm" in container.split(",") and codec == "vp9" and len(decoded) == video.frames
+    assert [r.getMessage() for r in caplog.records] == [
+        f"this PyAV has no H.264 encoder (libx264): {tmp_path / 'ep.webm'} is VP9 in WebM, not MP4"
+    ]
+
+
+def test_the_export_command_names_the_webm_it_wrote(recorded, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(video_module, "h264_available", lambda: False)
+    assert _cli(str(tmp_path / "one.mp4"), "--recording", str(recorded[0]), "--height", "160") == 0
+    assert f"wrote {tmp_path / 'one.webm'}: VP9 WebM, " in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "break_it, cause",
+    [
+        (  # an encoder that refuses to open (here: an option it does not know)
+            lambda m: m.setattr(
+                video_module, "_H264", dataclasses.replace(video_module._H264, options={"preset": "no-such-preset"})
+            ),
+            "cannot write video .*ep.mp4: .+; nothing was written there",
+        ),
+        (  # a file that lost its last frame on the way to the disk
+            lambda m: m.setattr(video_module, "frames", lambda ep, options: list(frames(ep, options))[:-1]),
+            r"cannot write video .*ep.mp4: \d+ of its \d+ frames reached the disk",
+        ),
+    ],
+)
+def test_a_failing_encoder_or_a_short_file_is_one_line_and_leaves_nothing(
+    recorded, tmp_path, monkeypatch, break_it, cause
+):
+    break_it(monkeypatch)
+    with pytest.raises(L3MVNError, match=cause) as err:
+        export_video(recorded[0], tmp_path / "ep.mp4", VideoOptions(height=160))
+    assert "\n" not in str(err.value) and list(tmp_path.iterdir()) == []
+
+
+def test_frames_have_even_sides_as_yuv420p_needs(recorded):
+    ep = read_episode(recorded[0])
+    for height in (120, 121, 241, 333, 480, 1079):
+        geo = FrameGeometry.of(ep, VideoOptions(height=height))
+        assert geo.width % 2 == 0 and geo.height % 2 == 0, (height, geo)
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,6 @@
-"""``l3mvn export``: an MP4 of one recording, or of the episodes of a result file, named by outcome.
+"""``l3mvn export``: a video of one recording, or of the episodes of a result file, named by outcome.
+
+The video is H.264 in MP4 (VP9 in WebM where the installed PyAV lacks libx264: ``export_video``).
 
 A result file's episodes are read through the result-line format's reader (``l3mvn.run.eval.results``):
 a malformed line is named with its line number and skipped, the others are exported; each episode's
@@ -119,9 +121,12 @@ def run_export(args: argparse.Namespace) -> int:
     return 0
 
 
+_CODEC_NAMES = {"h264": "H.264 MP4", "vp9": "VP9 WebM"}
+
+
 def _report(v: VideoResult) -> None:
     gif = f" and {v.gif}" if v.gif else ""
     print(
-        f"wrote {v.path}{gif}: {v.frames} frames ({v.title_frames} title + {v.steps} steps), {v.width}x{v.height} "
-        f"at {v.fps:g} fps"
+        f"wrote {v.path}{gif}: {_CODEC_NAMES[v.codec]}, {v.frames} frames ({v.title_frames} title + {v.steps} steps), "
+        f"{v.width}x{v.height} at {v.fps:g} fps"
     )
