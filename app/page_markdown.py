@@ -11,8 +11,9 @@ import math
 
 from l3mvn.agent.frontiers.types import POTENTIALS_RULE
 from l3mvn.run.registry import keeps_map
-from l3mvn.run.viz import COLLISION_RGB
+from l3mvn.run.viz import COLLISION_RGB, category_color
 from l3mvn_studio.frontier_ranking import TOP_LABELS, frontier_score
+from l3mvn_studio.language_panel import query_of
 from l3mvn_studio.map_image import (
     FREE,
     GLIMPSED,
@@ -90,7 +91,8 @@ def no_map_markdown(policy: str, *, started: bool) -> str:
 
 
 def frontier_markdown(view: MapView) -> str:
-    """The Frontiers table, best score first, then each frontier's first language query."""
+    """The Frontiers table, best score first, then each frontier's query for the target: the sentence
+    the Language folder shows (a zero-shot scorer asks one per goal, a feed-forward head one for all)."""
     if not view.frontiers:
         return (
             "_no frontiers: the policy keeps no map_"
@@ -106,7 +108,7 @@ def frontier_markdown(view: MapView) -> str:
         rows.append(
             f"| {'★' if f.chosen else ''}F{f.id} | {llm} | {f.s_cu:.2f} | {fused} | {md(', '.join(f.objects) or '-')} |"
         )
-    queries = [f"- F{f.id} {code(q)}" for f in view.frontiers for q in list(f.queries.values())[:1]]
+    queries = [f"- F{f.id} {code(q)}" for f in view.frontiers if (q := query_of(f, view.target))]
     note = f"\n\n_Map labels show the best {TOP_LABELS} and the chosen (★) frontier; all are listed here._"
     return "\n".join(rows) + note + ("\n\n**Queries**\n" + "\n".join(queries) if queries else "")
 
@@ -121,7 +123,8 @@ def unavailable_markdown(problems: dict[str, str]) -> str:
 
 def legend_html(categories, *, target: str = "", ground_truth: bool = False) -> str:
     """Map colours, then the object categories the map shows, the target first and ringed as on
-    the map; the ground-truth layer's colours when it is on; then the frontier score colour bar."""
+    the map; the ground-truth layer's colours when it is on; then the frontier score colour bar.
+    The target is listed even before the map shows it: its colour is what the user looks out for."""
     fixed = [
         ("unexplored", UNEXPLORED),
         ("free", FREE),
@@ -132,7 +135,10 @@ def legend_html(categories, *, target: str = "", ground_truth: bool = False) -> 
         ("trajectory", TRAJECTORY),
     ]
     item = '<span style="display:inline-block;margin:2px 8px 2px 0;font-size:12px">{}</span>'
-    cats = sorted(categories, key=lambda c: c[0] != target)
+    cats = list(categories)
+    if target and target not in (name for name, _ in cats):
+        cats.append((target, category_color(target)))
+    cats.sort(key=lambda c: c[0] != target)
     parts = [item.format(_swatch(rgb) + name) for name, rgb in fixed]
     parts += [
         item.format(

@@ -444,6 +444,9 @@ class DashboardView:
             self.legend.content = legend_html(view.legend, target=view.target, ground_truth=self.ground_truth.value)
         elif snap.event is not None:
             self.frontier_pick.options, self.frontier_pick.disabled = ("none",), True
+            # A new episode before its first map: the last episode's legend (its categories, its target)
+            # must not stand for this one's.
+            self.legend.content = legend_html(legend(GOAL_CATEGORIES), target=snap.event.goal)
 
     def _offer_frontiers(self, view: MapView) -> None:
         """The Frontier dropdown: the map's frontiers to pick a manual goal from, or none to pick."""
