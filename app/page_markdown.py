@@ -76,7 +76,13 @@ def status_markdown(snap: Snapshot) -> str:
 
 
 def metrics_markdown(metrics: Metrics) -> str:
-    return f"**This server session**: {metrics.episodes} episodes done, SR {metrics.sr:.2f}, SPL {metrics.spl:.2f}"
+    line = f"**This server session**: {metrics.episodes} episodes done, SR {metrics.sr:.2f}, SPL {metrics.spl:.2f}"
+    if metrics.policies:
+        which = "policy" if len(metrics.policies) == 1 else "policies"
+        line += f" ({which} {md(', '.join(metrics.policies))})"
+    if metrics.steered:
+        line += f"; {metrics.steered} steered by hand, not counted"
+    return line
 
 
 def no_map_markdown(policy: str, *, started: bool) -> str:

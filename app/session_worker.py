@@ -88,6 +88,7 @@ class DashboardController:
         self._session: EpisodeSession | None = None
         self._trajectory: list[Pose] = []
         self._manual: Cell | None = None
+        self._steered = False  # a person chose where the agent went in this episode (a manual goal)
         self._segment_note = ""
         self._recorder_off: Callable[[], None] | None = None
         self._queue: queue.Queue[tuple[str, Callable[[], None], int | None]] = queue.Queue()
@@ -179,19 +180,25 @@ class DashboardController:
         self._submit("reset", lambda: self._do_reset(episode), client_id, busy=f"resetting to episode {episode.key}")
 
     def step(self, *, client_id: int | None = None) -> None:
+        """One step on the worker; on an episode that has ended, a notice that says so (nothing to do)."""
         with self._lock:
+            session = None if self._reset_pending else self._session
             if self._session is None and not self._reset_pending:
                 raise L3MVNError("no episode yet: pick one and press Reset (or Run, which starts it)")
-            if self._session is not None and isinstance(self._session.policy, TeleopAgent) and not self._reset_pending:
+            if session is not None and isinstance(session.policy, TeleopAgent):
                 raise L3MVNError(
                     f"Step does not apply to policy {TELEOP!r}: drive with the arrow keys / WASD or the Drive buttons"
                 )
+        if session is not None and session.done:
+            self._notify(_ended(session), client_id=client_id)
+            return
+        with self._lock:
             if self._running:
                 raise L3MVNError("Step is disabled while Run is active: press Pause first")
             if self._steps_pending >= MAX_QUEUED_STEPS:
                 raise L3MVNError(f"{self._steps_pending} steps are already queued: the agent is busy")
             self._steps_pending += 1
-        self._submit("step", self._do_step, client_id)
+        self._submit("step", lambda: self._do_step(client_id), client_id)
 
     def drive(self, action: str, *, client_id: int | None = None) -> None:
         """One step with ``action`` chosen by hand (policy ``teleop`` only), queued like Step."""
@@ -426,7 +433,7 @@ class DashboardController:
         # The same hash ``l3mvn eval`` writes for these settings, so dashboard runs can be matched.
         chash = config_hash(cfg, self.policy_name, self.seed)
         self._session = self._runner.session(scene, self.policy_name, self.bus, config_hash=chash)
-        self._manual, self._segment_note = None, ""
+        self._manual, self._segment_note, self._steered = None, "", False
         if self.record:
             self._start_recorder(episode)
         self._trajectory = []
@@ -477,9 +484,12 @@ class DashboardController:
                 self._busy[job] = f"{self._busy[job]}: {text}"
         self._publish()
 
-    def _do_step(self) -> None:
-        session = self._require_running_episode()
-        session.step()
+    def _do_step(self, client_id: int | None) -> None:
+        session = self._session
+        if session is not None and session.done:  # queued behind the step that ended the episode
+            self._notify(_ended(session), client_id=client_id)
+            return
+        self._require_running_episode().step()
 
     def _do_run_step(self) -> None:
         session = self._session
@@ -493,6 +503,7 @@ class DashboardController:
     def _do_manual_goal(self, session: EpisodeSession, cell: Cell | None) -> None:
         session.set_manual_goal(cell)
         self._manual = cell
+        self._steered = self._steered or cell is not None
         what = "cleared the manual goal" if cell is None else f"manual long-term goal set to map cell {cell}"
         self._notify(what)
         self._publish(note=what)
@@ -559,9 +570,10 @@ class DashboardController:
             with self._lock:
                 self._running = False  # this step's snapshot is the last: it must not say "running"
         if event.done and event.result is not None:
-            metrics = metrics.add(event.result)
+            steered = self._steered or isinstance(session.policy, TeleopAgent)
+            metrics = metrics.add_steered() if steered else metrics.add(event.result, session.policy_name)
             self._notify(
-                _outcome(event),
+                _outcome(event) + ("; steered by hand: not counted in the session's SR/SPL" if steered else ""),
                 level="info" if event.result.get("success") else "warning",
                 sticky=True,
                 title="Episode over",
@@ -638,11 +650,21 @@ class DashboardController:
         return session
 
 
+def _verdict(result: dict) -> str:
+    return "SUCCESS" if result.get("success") else f"FAILURE ({result.get('failure') or 'not reached'})"
+
+
 def _outcome(event: StepEvent) -> str:
     """One line for the end of an episode: what happened, in the units the paper reports."""
     r = event.result or {}
-    verdict = "SUCCESS" if r.get("success") else f"FAILURE ({r.get('failure') or 'not reached'})"
-    return f"episode {event.episode_key}: {verdict}, SPL {float(r.get('spl', 0.0)):.2f}, {r.get('steps')} steps"
+    return f"episode {event.episode_key}: {_verdict(r)}, SPL {float(r.get('spl', 0.0)):.2f}, {r.get('steps')} steps"
+
+
+def _ended(session: EpisodeSession) -> str:
+    """The answer to a Step once the episode is over: not a failure, just nothing left to step."""
+    assert session.episode is not None
+    verdict = _verdict(session.result.to_json())
+    return f"episode {session.episode.key} has ended ({verdict}): press Reset for the next one"
 
 
 def check_speed(value: float) -> float:

@@ -6,7 +6,7 @@ frames because the agent is faster than the page, only ever needs the latest one
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -79,11 +79,19 @@ class MapView:
 
 @dataclass(frozen=True)
 class Metrics:
-    """Running totals over this server session."""
+    """Running totals over this server session. SR and SPL cover only the episodes a policy ran by
+    itself (``policies`` names them): an episode a person steered measures the person, so it is only
+    counted, in ``steered``."""
 
     episodes: int = 0
     successes: int = 0
     spl_sum: float = 0.0
+    steered: int = 0
+    policies: tuple[str, ...] = ()
+
+    @property
+    def finished(self) -> int:
+        return self.episodes + self.steered
 
     @property
     def sr(self) -> float:
@@ -93,12 +101,17 @@ class Metrics:
     def spl(self) -> float:
         return self.spl_sum / self.episodes if self.episodes else 0.0
 
-    def add(self, result: dict) -> Metrics:
-        return Metrics(
-            self.episodes + 1,
-            self.successes + int(bool(result.get("success"))),
-            self.spl_sum + float(result.get("spl", 0.0)),
+    def add(self, result: dict, policy: str) -> Metrics:
+        return replace(
+            self,
+            episodes=self.episodes + 1,
+            successes=self.successes + int(bool(result.get("success"))),
+            spl_sum=self.spl_sum + float(result.get("spl", 0.0)),
+            policies=self.policies if policy in self.policies else self.policies + (policy,),
         )
+
+    def add_steered(self) -> Metrics:
+        return replace(self, steered=self.steered + 1)
 
 
 @dataclass(frozen=True)

@@ -406,8 +406,8 @@ class DashboardView:
         """What every snapshot may change: status, metrics, which controls are offered or held."""
         self.status.content = status_markdown(snap)
         self.metrics.content = metrics_markdown(snap.metrics)
-        if snap.metrics.episodes != self._listed_episodes:  # a finished episode may have written a recording
-            self._listed_episodes = snap.metrics.episodes
+        if snap.metrics.finished != self._listed_episodes:  # a finished episode may have written a recording
+            self._listed_episodes = snap.metrics.finished
             self.recordings.refresh()
         buttons = BUTTONS_RUNNING if snap.running or snap.run_queued else BUTTONS_PAUSED
         if tuple(self.controls.options) != buttons:

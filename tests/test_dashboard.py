@@ -258,3 +258,57 @@ def test_a_manual_goal_becomes_the_long_term_goal_and_is_recorded_as_an_override
     ctl.set_manual_goal(None)
     _steps(ctl, 1)
     assert ctl.events[-1].decision.override is None and ctl.snapshot.manual_goal is None
+
+
+def test_a_step_after_the_end_says_the_episode_has_ended_and_fails_nothing(ctl):
+    _run_nearest_episode_to_the_end(ctl)
+    assert ctl.snapshot.event.done
+    steps, seen = len(ctl.events), len(ctl.notices)
+    ctl.step()
+    assert ctl.wait_idle()
+    told = ctl.notices[seen:]
+    assert [(n.level, n.title) for n in told] == [("info", "")], told
+    assert re.fullmatch(r"episode \S+ has ended \(SUCCESS\): press Reset for the next one", told[0].text)
+    assert len(ctl.events) == steps and ctl.snapshot.error is None
+
+
+def test_episodes_steered_by_hand_are_counted_apart_from_the_policy_sr_and_spl(dash):
+    from dataclasses import replace
+
+    from l3mvn.world.datasets import load_episode_set
+    from l3mvn_studio.page_markdown import metrics_markdown
+    from l3mvn_studio.session_worker import DashboardController
+
+    cfg = SMALL.replace(sim=replace(SMALL.sim, max_steps=6))
+    c = DashboardController(load_episode_set(None, "val", houses=1, episodes_per_house=1, cfg=cfg), cfg)
+    scene = c.scene_keys[0]
+    episode = c.episodes_of(scene)[0].episode_id
+
+    def finish(policy: str, *, manual_goal: bool = False) -> None:
+        c.policy_name = policy
+        c.reset(scene, episode)
+        assert c.wait_idle()
+        if manual_goal:
+            c.step()
+            assert c.wait_idle()
+            c.set_manual_goal((480, 480))
+        c.set_speed(60)
+        c.run()
+        deadline = time.monotonic() + 20
+        while not (c.snapshot.event.done and c.wait_idle(0.1)) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert c.snapshot.event.done
+
+    try:
+        finish("oracle")
+        finish("frontier", manual_goal=True)
+        c.policy_name = "teleop"
+        c.reset(scene, episode)
+        assert c.wait_idle()
+        c.drive("stop")
+        assert c.wait_idle() and c.snapshot.event.done
+        m = c.snapshot.metrics
+        assert (m.episodes, m.steered, m.policies) == (1, 2, ("oracle",))
+        assert metrics_markdown(m).endswith(f"SPL {m.spl:.2f} (policy oracle); 2 steered by hand, not counted")
+    finally:
+        c.close()

@@ -7,6 +7,7 @@ import dataclasses
 import json
 import logging
 import re
+import shutil
 import sys
 
 import av
@@ -299,8 +300,8 @@ def _row(path, **kw):
 def test_a_result_line_finds_its_recording_and_is_named_by_outcome(recorded, tmp_path):
     path, _ = recorded
     video = export_result_video(_row(path), path.parent, tmp_path)
-    assert video.path == tmp_path / "fail_unseen_in_explored_procedural-0003_0.mp4"
-    assert result_video_name(_row(path, success=1.0, failure="success")) == "success_procedural-0003_0.mp4"
+    assert video.path == tmp_path / "fail_unseen_in_explored_procedural-0003_0_frontier.mp4"
+    assert result_video_name(_row(path, success=1.0, failure="success")) == "success_procedural-0003_0_frontier.mp4"
     with pytest.raises(L3MVNError, match="no recording of procedural-0003 episode 0 \\(cost-utility\\)"):
         export_result_video(_row(path, policy="cost-utility"), path.parent, tmp_path)
 
@@ -343,9 +344,29 @@ def test_the_export_command_single_and_batch(recorded, tmp_path, capsys):
         )
         == 0
     )
-    assert sorted(p.name for p in out.iterdir()) == ["fail_unseen_in_explored_procedural-0003_0.mp4"]
+    assert sorted(p.name for p in out.iterdir()) == ["fail_unseen_in_explored_procedural-0003_0_frontier.mp4"]
     captured = capsys.readouterr()
     assert "skipped elsewhere/0/0: no recording" in captured.err and "wrote 1 videos" in captured.out
+
+
+def test_two_policies_of_one_episode_exported_into_one_folder_keep_both_videos(recorded, tmp_path, capsys):
+    """Each result file holds one policy: exported into the same folder, neither overwrites the other."""
+    path, _ = recorded
+    recordings = tmp_path / "recordings"
+    recordings.mkdir()
+    shutil.copy(path, recordings / path.name)
+    shutil.copy(path, recordings / path.name.replace("_frontier", "_cost-utility"))
+    names = {result_video_name(_row(path, policy=p)) for p in ("frontier", "cost-utility")}
+    assert len(names) == 2
+    out = tmp_path / "videos"
+    for policy in ("frontier", "cost-utility"):
+        results = tmp_path / f"{policy}.jsonl"
+        results.write_text(json.dumps(_row(path, policy=policy)) + "\n")
+        assert (
+            _cli("--results", str(results), "--recordings", str(recordings), "--out", str(out), "--height", "160") == 0
+        )
+    assert sorted(p.name for p in out.iterdir()) == sorted(names)
+    assert "procedural-0003_0_cost-utility.mp4" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(
@@ -387,7 +408,7 @@ def test_malformed_result_lines_are_named_and_skipped(recorded, tmp_path, capsys
     assert [re.search(r"r\.jsonl: skipped line (\d+): ", line).group(1) for line in err] == list("1245678")
     assert "line 4: 'episode_id' is \"abc\", not a whole number >= 0" in err[2]
     assert "nested deeper than" in err[4] and "NaN" in err[5]
-    assert [p.name for p in (tmp_path / "o").iterdir()] == ["fail_unseen_in_explored_procedural-0003_0.mp4"]
+    assert [p.name for p in (tmp_path / "o").iterdir()] == ["fail_unseen_in_explored_procedural-0003_0_frontier.mp4"]
     only_bad = tmp_path / "only_bad.jsonl"
     only_bad.write_text("{oops\n")
     assert _cli("--results", str(only_bad), "--recordings", str(path.parent), "--out", str(tmp_path / "o")) == 2

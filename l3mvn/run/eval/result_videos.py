@@ -20,13 +20,12 @@ from l3mvn.run.recording.drawing import VideoOptions
 from l3mvn.run.recording.video import VideoResult, export_video
 
 
-def result_video_name(row: dict, *, with_policy: bool = False) -> str:
-    """``<outcome>_<scene>_<episode>[_<policy>].mp4``, outcome ``success`` or ``fail_<cause>``."""
+def result_video_name(row: dict) -> str:
+    """``<outcome>_<scene>_<episode>_<policy>.mp4``, outcome ``success`` or ``fail_<cause>``. The policy is
+    always named: videos of several result files (one policy each) may share a folder."""
     outcome = "success" if row.get("success") == 1 else f"fail_{recording_name_part(str(row.get('failure')))}"
     parts = [outcome.replace("-", "_"), recording_name_part(str(row["scene"])), str(int(row["episode_id"]))]
-    if with_policy:
-        parts.append(recording_name_part(str(row["policy"])))
-    return "_".join(parts) + ".mp4"
+    return "_".join(parts + [recording_name_part(str(row["policy"]))]) + ".mp4"
 
 
 def export_result_video(
@@ -35,7 +34,6 @@ def export_result_video(
     out_dir: str | Path,
     options: VideoOptions = VideoOptions(),
     *,
-    with_policy: bool = False,
     gif: bool = False,
 ) -> VideoResult:
     """The video of one result row (``row_problem`` passed it), from its recording in
@@ -46,7 +44,7 @@ def export_result_video(
             f"no recording of {row['scene']} episode {row['episode_id']} ({row['policy']}) in "
             f"{recordings_dir}: run eval with --record"
         )
-    return export_video(found, Path(out_dir) / result_video_name(row, with_policy=with_policy), options, gif=gif)
+    return export_video(found, Path(out_dir) / result_video_name(row), options, gif=gif)
 
 
 def add_export_arguments(parser: argparse.ArgumentParser) -> None:
@@ -55,7 +53,7 @@ def add_export_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--recording", help="the .rrd to export (l3mvn eval --record writes them)")
     parser.add_argument("--results", help="batch: an eval result file (.jsonl); one video per episode line")
     parser.add_argument("--recordings", help="batch: the folder holding the recordings of --results")
-    parser.add_argument("--out", help="batch: the folder to write <outcome>_<scene>_<episode>.mp4 into")
+    parser.add_argument("--out", help="batch: the folder to write <outcome>_<scene>_<episode>_<policy>.mp4 into")
     parser.add_argument("--failures", action="store_true", help="batch: only the episodes that failed")
     parser.add_argument("--gif", action="store_true", help="also write a GIF beside each MP4 (for READMEs)")
     defaults = VideoOptions()
@@ -104,11 +102,10 @@ def run_export(args: argparse.Namespace) -> int:
     if not chosen:
         print(f"{args.results}: no {'failed ' if args.failures else ''}episodes: nothing to export")
         return 0
-    with_policy = len({r["policy"] for r in chosen}) > 1
     skipped = []
     for row in chosen:
         try:
-            _report(export_result_video(row, args.recordings, args.out, options, with_policy=with_policy, gif=args.gif))
+            _report(export_result_video(row, args.recordings, args.out, options, gif=args.gif))
         except L3MVNError as exc:
             skipped.append(f"{row['key']}: {exc}")
     for line in skipped:
