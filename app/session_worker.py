@@ -74,6 +74,9 @@ class DashboardController:
         if not episodes.episodes:
             raise L3MVNError(f"{episodes.name}/{episodes.split} has no episodes to show")
         self.episodes, self.cfg, self.seed = episodes, cfg or Config(), seed
+        # A head file the server was started with (--set policy.head=FILE) stays one of the Head choices.
+        started = self.cfg.policy.head
+        self._head_files = () if started is None or started in HEAD_KINDS else (started,)
         self.policy_name = check_policy(policy)
         self.scorer: str | None = None
         self.record = False
@@ -129,10 +132,10 @@ class DashboardController:
             raise L3MVNError(f"unknown scene {scene_key!r}; valid scenes: {', '.join(self._by_scene)}")
         return self._by_scene[scene_key]
 
-    @staticmethod
-    def head_names() -> tuple[str, ...]:
-        """The Head dropdown's choices: the default first, then every feed-forward head kind."""
-        return (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS
+    def head_names(self) -> tuple[str, ...]:
+        """The Head dropdown's choices: the default first, then every feed-forward head kind, then the
+        head file the server was started with, if any."""
+        return (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS + self._head_files
 
     @property
     def head(self) -> str:

@@ -125,3 +125,24 @@ def test_without_an_llm_the_zero_shot_policy_says_what_it_scores_with_instead(mo
         assert any("scores with 'roomtype' instead of an LLM" in n.text and n.level == "warning" for n in c.notices)
     finally:
         c.close()
+
+
+def test_a_head_file_the_server_starts_with_is_one_of_the_head_choices(tmp_path):
+    import torch
+
+    from l3mvn.agent.language import GOALS
+    from l3mvn.agent.language.head import GoalHead, save_head
+
+    path = tmp_path / "mine.pt"
+    torch.manual_seed(0)
+    meta = {"kind": "frontiers", "object_filter": "all", "encoder": "minilm", "goals": list(GOALS)}
+    save_head(GoalHead(384, len(GOALS)).eval(), meta, path)
+    c = _controller(_with_head(str(path)), "l3mvn-ff")
+    try:
+        assert c.head == str(path) and c.head_names() == (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS + (str(path),)
+        assert _reset(c).policy.global_policy.scorer.meta["kind"] == "frontiers"
+        c.set_head("rooms")
+        c.set_head(str(path))  # the file can be chosen again after another head
+        assert c.cfg.policy.head == str(path)
+    finally:
+        c.close()
