@@ -174,8 +174,15 @@ def main(argv: list[str] | None = None) -> int:
     """The installed ``l3mvn`` script: the library's commands and the dashboard's ``serve``."""
     from l3mvn.run.cli import Command
     from l3mvn.run.cli import main as l3mvn_main
+    from l3mvn_studio import report
 
-    return l3mvn_main(argv, extra={"serve": Command("the live web dashboard (viser)", add_arguments, run)})
+    return l3mvn_main(
+        argv,
+        extra={
+            "serve": Command("the live web dashboard (viser)", add_arguments, run),
+            "report": Command(report.HELP, report.add_report_arguments, report.run_report),
+        },
+    )
 
 
 if __name__ == "__main__":
