@@ -11,6 +11,7 @@ files (``open_rows``).
 from __future__ import annotations
 
 import base64
+import contextlib
 import itertools
 import logging
 import threading
@@ -34,6 +35,7 @@ from l3mvn_studio.compare import (
     side_folder,
 )
 from l3mvn_studio.map_image import png_bytes
+from l3mvn_studio.page_layout import MAP_AREA_VARS
 from l3mvn_studio.page_text import html, md
 from l3mvn_studio.results import EpisodeRow, recording_of, rerun
 
@@ -49,7 +51,7 @@ def main_view_html(
     rgb: np.ndarray, title: str, *, main_view: bool, note: str = 'untick "Show in main view" for the live map'
 ) -> str:
     """``rgb`` as a PNG in the page (lossless: the page receives exactly these pixels): over the main
-    view (left of the control panel, scaled to fill it, under a title bar), or in the panel at its width."""
+    view (the map's canvas, scaled to fill it, under a title bar), or in the panel at its width."""
     src = "data:image/png;base64," + base64.b64encode(png_bytes(rgb)).decode("ascii")
     img = f"<img class='l3mvn-picture' alt='{html(title)}' src='{src}' style='max-width:100%;max-height:100%;"
     if not main_view:
@@ -59,8 +61,8 @@ def main_view_html(
         f"<span style='font-weight:400;color:#aaa'>({html(note)})</span></div>"
     )
     return (
-        f"<div class='l3mvn-main-view' style='position:fixed;left:0;top:0;bottom:0;"
-        f"width:calc(100vw - 440px);z-index:{10 + next(_ORDER)};background:#181818;display:flex;"
+        f"<div class='l3mvn-main-view' style='position:fixed;{MAP_AREA_VARS};"
+        f"z-index:{10 + next(_ORDER)};background:#181818;display:flex;"
         f"flex-direction:column'>{head}<div style='flex:1;min-height:0;display:flex;align-items:center;"
         f"justify-content:center;padding:4px'>{img}width:100%;height:100%;object-fit:contain'></div></div>"
     )
@@ -80,6 +82,7 @@ class ComparePanel:
         selected_episode: Callable[[], Episode],
         on: Callable,
         tell: Callable,
+        overlay: viser.GuiFolderHandle | None = None,
     ) -> None:
         self.source, self.config, self.record_dir = source, config, Path(record_dir)
         self._selected_episode, self._tell = selected_episode, tell
@@ -105,8 +108,10 @@ class ComparePanel:
             self.jump = gui.add_button("Jump to first difference", disabled=True)
             self.difference = gui.add_markdown("")
             self.lines = gui.add_markdown("")
-        # Outside the folder: a comparison opened from the Results panel shows with the folder closed.
-        self.picture = gui.add_html(NO_PICTURE)
+        # Outside the folder (in ``overlay``, always shown, when given): a comparison opened from the
+        # Results panel shows with the folder closed.
+        with overlay if overlay is not None else contextlib.nullcontext():
+            self.picture = gui.add_html(NO_PICTURE)
         self._held = (self.policy_a, self.policy_b, self.run, self.step, self.jump)
         self._followed = first  # the dashboard policy A last took
         self._wire(on)
@@ -180,16 +185,7 @@ class ComparePanel:
         for letter, row in (("A", a), ("B", b)):
             progress(f"re-running {letter} (line {row.index}, {row.policy}) with its stored config")
             folder = side_folder(self.record_dir, str(row.raw.get("config_hash", "stored")))
-            s = self.source
-            done = rerun(
-                row.raw,
-                dataset=s.dataset,
-                split=s.split,
-                houses=s.houses,
-                episodes_per_house=s.episodes_per_house,
-                seed=s.seed,
-                record_dir=folder,
-            )
+            done = rerun(row.raw, self.source, record_dir=folder)
             paths.append(done.recording)
             log.info("compare: %s", done.summary)
         progress("reading both recordings")
@@ -224,8 +220,7 @@ class ComparePanel:
         )
         self._tell(
             client_id,
-            f"compared {comparison.episode_key}: {comparison.difference_line} (step through both "
-            "in the Compare folder)",
+            f"compared {comparison.episode_key}: {comparison.difference_line} (step through both in the Compare tab)",
         )
 
     def _done(self, comparison: Comparison | None, status: str) -> None:

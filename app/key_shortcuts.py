@@ -1,7 +1,9 @@
 """Keyboard shortcuts: a script each tab runs that turns keys into clicks on the page's own buttons.
 
 A key clicks a button by its label, so a shortcut goes through the same checks as a click, does
-nothing while its button is hidden or disabled, and is ignored while the user types in a field.
+nothing while its button is hidden or disabled, and is ignored only while the user types: in a text
+or number field, a text area, editable text, or a dropdown whose list is open (its search box). The
+focus a click leaves on a checkbox, a button, a closed dropdown or the map keeps the keys working.
 The labels here are the ones the view gives its buttons.
 """
 
@@ -23,12 +25,17 @@ if (!window.__l3mvnShortcuts) {
                  "d": "Turn right", "arrowright": "Turn right", "q": "Look up", "e": "Look down", "x": "Stop"};
   const shown = (name) => Array.from(document.querySelectorAll("button"))
     .some((b) => b.textContent.trim() === name && b.offsetParent !== null);
+  // Inputs that take no typed text: a key there is the page's, not the field's.
+  const untyped = ["checkbox", "radio", "button", "submit", "reset", "range", "color", "file", "image", "hidden"];
+  const typing = (t) => {
+    if (!(t instanceof HTMLElement)) return false;
+    if (t.isContentEditable || t.tagName === "TEXTAREA") return true;
+    if (t.tagName !== "INPUT" || t.readOnly || untyped.includes(t.type)) return false;
+    // A dropdown's input is a search box only while its list is open.
+    return t.getAttribute("role") !== "combobox" || t.getAttribute("aria-expanded") === "true";
+  };
   const ours = (e) => {
-    const t = e.target;
-    if (e.ctrlKey || e.metaKey || e.altKey) return null;
-    const typing = t instanceof HTMLElement
-      && (t.isContentEditable || ["INPUT", "TEXTAREA", "SELECT"].includes(t.tagName));
-    if (typing) return null;
+    if (e.ctrlKey || e.metaKey || e.altKey || typing(e.target)) return null;
     const key = e.key.toLowerCase();
     if (drive[key] && shown("Forward")) return [drive[key]];
     return keys[key] || null;

@@ -15,22 +15,31 @@ import numpy as np
 from l3mvn.agent.decision import Decision
 from l3mvn.agent.frontiers.types import POTENTIALS_RULE
 from l3mvn.core.types import Pose
-from l3mvn.run.viz import COLLISION_RGB, category_palette, legend
+from l3mvn.run.viz import (
+    COLLISION_RGB,
+    FREE_RGB,
+    GLIMPSED_RGB,
+    GUESSED_RGB,
+    OBSTACLE_RGB,
+    TRAJECTORY_RGB,
+    UNEXPLORED_RGB,
+    category_palette,
+    legend,
+    score_colors,
+)
 from l3mvn.world.scenes.scene import SceneMap
+from l3mvn_studio.frontier_ranking import frontier_score
 from l3mvn_studio.state import Cell, FrontierMarker, MapView
 
-UNEXPLORED = (28, 30, 36)
-FREE = (226, 226, 220)
-GLIMPSED = (170, 170, 160)  # explored only from afar (SemanticMap.looked): what the agent may go look at
-OBSTACLE = (112, 112, 124)
-GUESSED = (70, 72, 88)  # an obstacle only guessed from depth too near to read (SemanticMap.inferred)
-TRAJECTORY = (10, 10, 10)
+# The map's colours are the one scheme of l3mvn.run.viz, under the names the live map's callers use.
+UNEXPLORED, FREE, GLIMPSED = UNEXPLORED_RGB, FREE_RGB, GLIMPSED_RGB
+OBSTACLE, GUESSED, TRAJECTORY = OBSTACLE_RGB, GUESSED_RGB, TRAJECTORY_RGB
 # The target's cells get a white ring inside a black one: one of them shows on any background.
 TARGET_RINGS = ((255, 255, 255), (0, 0, 0))
 # Ground truth drawn over the map on demand (RGBA): what the agent does not know.
 GT_FLOOR = (60, 140, 255, 90)
 GT_REGION = (0, 210, 90, 150)
-GT_GOAL = (255, 0, 200, 255)
+GT_GOAL = (0, 255, 255, 255)  # not the long-term goal's magenta: the agent does not know these
 MARGIN_CELLS = 24
 TARGET_PIXELS = 640
 
@@ -164,17 +173,17 @@ def png_rgb(png: bytes) -> np.ndarray:
     return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
 
 
-def score_color(score: float | None) -> tuple[int, int, int]:
-    """Low score dark purple -> high score yellow (viridis anchors); unscored grey."""
-    if score is None or not math.isfinite(score):
-        return (150, 150, 150)
-    s = min(max(score, 0.0), 1.0) * (len(_VIRIDIS) - 1)
-    i = min(int(s), len(_VIRIDIS) - 2)
-    t = s - i
-    return tuple(int(round(a * (1 - t) + b * t)) for a, b in zip(_VIRIDIS[i], _VIRIDIS[i + 1]))  # type: ignore[return-value]
+def frontier_colors(frontiers: tuple[FrontierMarker, ...]) -> list[tuple[int, int, int]]:
+    """Each frontier's colour: its score on the scale fitted to the scores of ``frontiers``
+    (``l3mvn.run.viz.fitted_scores``: min-max), so a narrow band of scores spans the whole colormap."""
+    rgb = score_colors([frontier_score(f) for f in frontiers])
+    return [(int(r), int(g), int(b)) for r, g, b in rgb]
 
 
-_VIRIDIS = ((68, 1, 84), (59, 82, 139), (33, 145, 140), (94, 201, 98), (253, 231, 37))
+def score_range(frontiers: tuple[FrontierMarker, ...]) -> tuple[float, float] | None:
+    """The lowest and highest finite score of ``frontiers`` (the fitted scale's ends), or None."""
+    scores = [s for s in (frontier_score(f) for f in frontiers) if math.isfinite(s)]
+    return (min(scores), max(scores)) if scores else None
 
 
 def _marker(f, chosen: bool) -> FrontierMarker:

@@ -11,7 +11,7 @@ import math
 
 from l3mvn.agent.frontiers.types import POTENTIALS_RULE
 from l3mvn.run.registry import keeps_map
-from l3mvn.run.viz import COLLISION_RGB, category_color
+from l3mvn.run.viz import AGENT_RGB, COLLISION_RGB, GOAL_RGB, SCORE_SCALE, category_color, colormap
 from l3mvn_studio.frontier_ranking import TOP_LABELS, frontier_score
 from l3mvn_studio.language_panel import query_of
 from l3mvn_studio.map_image import (
@@ -24,11 +24,12 @@ from l3mvn_studio.map_image import (
     OBSTACLE,
     TRAJECTORY,
     UNEXPLORED,
-    score_color,
+    score_range,
 )
 from l3mvn_studio.page_text import code, html, md
 from l3mvn_studio.state import MapView, Metrics, Snapshot
 
+SPEED_KEPT = 0.9  # a Run within 10% of the asked speed is "as asked" (the timer's own jitter is a few %)
 POLICY_NOTES = {
     "random-walk": "random-walk is the paper's baseline: uniformly random actions, STOP among them, "
     "so most episodes end within a few steps",
@@ -52,6 +53,8 @@ def status_markdown(snap: Snapshot) -> str:
     lines.append(f"**{md(ev.episode_key)}** ({md(snap.policy)}), target **{md(ev.goal)}**, {state}")
     action = ev.action.name.lower() if ev.action is not None else "(reset)"
     lines.append(f"Step **{ev.step}**, action {code(action)}, segment {md(ev.segment)}")
+    if snap.running and snap.achieved_steps_per_second is not None:
+        lines.append(speed_words(snap.achieved_steps_per_second, snap.steps_per_second))
     dist = ev.ground_truth.get("distance_to_goal_m")
     if dist is not None:
         lines.append(f"Distance to goal: {dist:.2f} m _(ground truth, not known to the agent)_")
@@ -73,6 +76,16 @@ def status_markdown(snap: Snapshot) -> str:
     if snap.note and snap.note not in ("running", "paused"):
         lines.append(f"_{md(snap.note)}_")
     return "\n\n".join(lines)
+
+
+def speed_words(achieved: float, asked: float) -> str:
+    """The Run's speed as achieved beside the asked one; slower than asked says where the time goes."""
+    if achieved >= SPEED_KEPT * asked:
+        return f"Speed: {achieved:.1f} steps/s, as asked"
+    return (
+        f"Speed: **{achieved:.1f} steps/s** of {asked:g} asked: a step (agent, simulator, drawing) takes "
+        f"{1000 / achieved:.0f} ms here, longer than the {1000 / asked:.0f} ms wait asked for"
+    )
 
 
 def metrics_markdown(metrics: Metrics) -> str:
@@ -127,9 +140,10 @@ def unavailable_markdown(problems: dict[str, str]) -> str:
     return f"**Unavailable scorers** (refused if picked):\n{lines}"
 
 
-def legend_html(categories, *, target: str = "", ground_truth: bool = False) -> str:
+def legend_html(categories, *, target: str = "", ground_truth: bool = False, frontiers=()) -> str:
     """Map colours, then the object categories the map shows, the target first and ringed as on
-    the map; the ground-truth layer's colours when it is on; then the frontier score colour bar.
+    the map; the ground-truth layer's colours when it is on; then the frontier score colour bar,
+    fitted to the scores of ``frontiers`` (this step's) with its two ends' scores written out.
     The target is listed even before the map shows it: its colour is what the user looks out for."""
     fixed = [
         ("unexplored", UNEXPLORED),
@@ -139,6 +153,8 @@ def legend_html(categories, *, target: str = "", ground_truth: bool = False) -> 
         ("obstacle too near for depth (guessed)", GUESSED),
         ("collision marks", COLLISION_RGB),
         ("trajectory", TRAJECTORY),
+        ("agent", AGENT_RGB),
+        ("long-term goal", GOAL_RGB),
     ]
     item = '<span style="display:inline-block;margin:2px 8px 2px 0;font-size:12px">{}</span>'
     cats = list(categories)
@@ -157,14 +173,27 @@ def legend_html(categories, *, target: str = "", ground_truth: bool = False) -> 
             item.format(_swatch(rgba[:3]) + f"<b>ground truth</b>: {name}")
             for name, rgba in (("floor plan", GT_FLOOR), ("success region", GT_REGION), ("goal instances", GT_GOAL))
         ]
-    stops = ", ".join(f"rgb{score_color(s / 4)}" for s in range(5))
-    bar = (
-        f'<div style="font-size:12px;margin-top:4px">frontier score 0 '
+    return f'<div style="line-height:1.2">{"".join(parts)}</div>{_score_bar(tuple(frontiers))}'
+
+
+def _score_bar(frontiers: tuple) -> str:
+    """The colour bar with the scale's ends: this step's lowest and highest frontier score."""
+    stops = ", ".join(f"rgb{tuple(int(v) for v in rgb)}" for rgb in colormap([s / 4 for s in range(5)]))
+    ends = score_range(frontiers)
+    if ends is None:
+        low, high, note = "low", "high", "no frontiers this step"
+    elif ends[1] - ends[0] < 1e-9:
+        low = high = f"{ends[0]:.2f}"
+        note = f"all {len(frontiers)} frontiers score alike"
+    else:
+        low, high = f"{ends[0]:.2f}", f"{ends[1]:.2f}"
+        note = f"{SCORE_SCALE} over this step's {len(frontiers)} frontiers"
+    return (
+        f'<div style="font-size:12px;margin-top:4px" class="l3mvn-score-scale">frontier score {low} '
         f'<span style="display:inline-block;width:120px;height:10px;vertical-align:middle;'
-        f'background:linear-gradient(to right, {stops})"></span> 1 (fused where the policy fuses, '
+        f'background:linear-gradient(to right, {stops})"></span> {high} ({note}; fused where the policy fuses, '
         f"else cost-utility)</div>"
     )
-    return f'<div style="line-height:1.2">{"".join(parts)}</div>{bar}'
 
 
 def _manual_goal_words(snap: Snapshot) -> str:

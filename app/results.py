@@ -1,5 +1,6 @@
 """The results browser's data: eval result files in a folder, their episodes, filters, summaries,
-recordings read back frame by frame, and a headless re-run of one result line.
+recordings read back frame by frame, a headless re-run of one result line, and the episode of a line
+as the live session loads it (its scene, stored config and policy, and its recording's poses).
 
 The browser only offers files found in the ``--results`` folder (nothing typed in the page), and every
 bad file or line becomes a one-line problem beside what could be read, never an exception in a view.
@@ -17,12 +18,18 @@ import numpy as np
 
 from l3mvn.core.config import Config
 from l3mvn.core.errors import L3MVNError, first_line
+from l3mvn.core.types import Pose
 from l3mvn.run.eval.job import EvalJob
 from l3mvn.run.eval.results import episode_lines
-from l3mvn.run.recording.catalogue import find_recording, recording_path, unique_tag
+from l3mvn.run.recording.catalogue import TIMELINE, find_recording, open_recording, recording_path, unique_tag
 from l3mvn.run.recording.drawing import VideoOptions, frames
+from l3mvn.run.recording.entities import WORLD_AGENT, reader_path
 from l3mvn.run.recording.recorded import read_episode
+from l3mvn.run.registry import check_policy
+from l3mvn.world.datasets import load_episode_set
+from l3mvn_studio.compare import EpisodeSource
 from l3mvn_studio.map_image import png_bytes
+from l3mvn_studio.session_worker import EpisodeStart
 
 ALL, FAILURES, SUCCESSES = "all", "failures", "successes"
 SORT_KEYS = ("row", "scene", "goal", "success", "spl", "dtg", "steps", "failure", "coverage")
@@ -174,6 +181,70 @@ def recording_frames(path: str | Path) -> tuple[list[bytes], list[str]]:
     return pictures, [f"step {s.step}: {s.decision or '(no decision logged)'}" for s in ep.steps]
 
 
+def recorded_poses(path: str | Path) -> dict[int, Pose]:
+    """The agent's pose at each step of a recording (its world transform); one-line L3MVNError when the
+    file is not a readable recording."""
+    p = Path(path)
+    reader = open_recording(p)
+    poses: dict[int, Pose] = {}
+    try:
+        for chunk in reader.stream(store=reader.recordings()[0]):
+            if chunk.entity_path != reader_path(WORLD_AGENT):
+                continue
+            batch = chunk.to_record_batch()
+            names = set(batch.schema.names)
+            if not {TIMELINE, _TRANSLATION, _ROTATION} <= names:
+                continue
+            for step, xyz, turn in zip(
+                batch.column(TIMELINE).to_pylist(),
+                batch.column(_TRANSLATION).to_pylist(),
+                batch.column(_ROTATION).to_pylist(),
+                strict=True,
+            ):
+                if step is not None and xyz and turn:
+                    poses[int(step)] = Pose(float(xyz[0][0]), float(xyz[0][1]), float(turn[0]["angle"]))
+    except (RuntimeError, ValueError, OSError, KeyError, TypeError, IndexError, L3MVNError) as exc:
+        raise L3MVNError(f"{p.name} is not a readable rerun recording: {first_line(exc)}") from None
+    return poses
+
+
+_TRANSLATION, _ROTATION = "Transform3D:translation", "Transform3D:rotation_axis_angle"
+
+
+def episode_start(row: dict, source: EpisodeSource, recording: Path | None = None) -> EpisodeStart:
+    """The episode of a result line as the live session loads it: its scene and episode from the episode
+    set the eval ran (built with the line's stored config, as ``rerun`` does), its policy and config,
+    and the poses of ``recording`` (when given) to check the replay against."""
+    cfg = config_of(row)
+    policy = check_policy(str(row.get("policy")))
+    s = source
+    episodes = load_episode_set(
+        s.dataset,
+        s.split,
+        houses=s.houses,
+        episodes_per_house=s.episodes_per_house,
+        seed=s.seed,
+        cfg=cfg,
+        scenes_dir=s.scenes,
+    )
+    key = str(row.get("key"))
+    episode = next((ep for ep in episodes.episodes if ep.key == key), None)
+    if episode is None:
+        raise L3MVNError(
+            f"episode {key} is not in this dashboard's episode set; start serve with the eval's "
+            "--dataset/--houses/--episodes-per-house/--seed"
+        )
+    return EpisodeStart(
+        episodes.name,
+        episodes.scene_of(episode),
+        episode,
+        policy,
+        cfg,
+        str(row.get("config_hash") or ""),
+        {} if recording is None else recorded_poses(recording),
+    )
+
+
 def config_of(row: dict) -> Config:
     """The config tree stored in a result line; a line without one or with unknown fields is an error."""
     stored = row.get("config")
@@ -216,26 +287,17 @@ class Rerun:
         )
 
 
-def rerun(
-    row: dict,
-    *,
-    dataset: str | None,
-    split: str,
-    houses: int,
-    episodes_per_house: int,
-    seed: int,
-    record_dir: str | Path,
-) -> Rerun:
+def rerun(row: dict, source: EpisodeSource, record_dir: str | Path) -> Rerun:
     """Run the line's episode again, exactly as ``l3mvn eval`` did (same job path, its stored config and
     policy, this dashboard's episode set and seed), recorded under a name of its own in ``record_dir``
     (``unique_tag``), so a re-run never replaces a recording and concurrent re-runs never share a file."""
     cfg = config_of(row)
     job = EvalJob.create(
-        dataset,
-        split,
-        houses=houses,
-        episodes_per_house=episodes_per_house,
-        seed=seed,
+        source.dataset,
+        source.split,
+        houses=source.houses,
+        episodes_per_house=source.episodes_per_house,
+        seed=source.seed,
         config=cfg,
         policy=str(row.get("policy")),
         record_dir=record_dir,

@@ -1,15 +1,19 @@
 """The Results panel: browse the eval result files of ``serve --results DIR``.
 
 Pick a file (only files in that folder are offered), filter and sort its episodes, read summaries per
-category and failure cause, open an episode's recording and scrub its steps, or, without one, re-run
-it here with the config stored in its line (recorded, so it then opens like any other). A second file
-can be compared: the episodes one solved and the other did not, and any episode in both side by side
-(the Compare folder's view, each line with its stored config and policy).
+category and failure cause, open an episode's recording and scrub its steps, open it in rerun's web
+viewer, or, without one, re-run it here with the config stored in its line (recorded, so it then
+opens like any other). An episode loads into the live session at any step, run with its line's
+config and policy: from there the policy continues (Step, Run) or teleop takes over. Other files can
+be compared with the one shown: their config differences first, then each file's SR, SPL and DTG and
+the paired differences against the shown file, then the episodes one solved and another did not; any
+episode two files hold opens side by side (the Compare folder's view).
 """
 
 from __future__ import annotations
 
 import logging
+import re
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -19,14 +23,18 @@ import numpy as np
 import viser
 
 from l3mvn.core.errors import L3MVNError
+from l3mvn.run.eval.paired import LEVEL
+from l3mvn_studio.compare import EpisodeSource
 from l3mvn_studio.compare_view import ComparePanel, main_view_html
 from l3mvn_studio.map_image import png_rgb
 from l3mvn_studio.page_text import code, html, md
+from l3mvn_studio.recordings_view import RecordingsPanel
 from l3mvn_studio.results import (
     ALL,
     SORT_KEYS,
     EpisodeRow,
     ResultFile,
+    episode_start,
     filter_choices,
     list_result_files,
     load_result_file,
@@ -34,9 +42,10 @@ from l3mvn_studio.results import (
     recording_of,
     rerun,
     select,
-    solved_by_one,
     summaries,
 )
+from l3mvn_studio.results_comparison import FilesComparison, compare_files
+from l3mvn_studio.session_worker import DashboardController
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +70,12 @@ class ResultsSource:
     houses: int
     episodes_per_house: int
     seed: int
+    scenes: str | None = None  # scan root of a habitat ObjectNav dataset (serve --scenes)
+
+    @property
+    def episodes(self) -> EpisodeSource:
+        """The episode set a re-run or a load builds its episode from."""
+        return EpisodeSource(self.dataset, self.split, self.houses, self.episodes_per_house, self.seed, self.scenes)
 
 
 class ResultsPanel:
@@ -74,10 +89,18 @@ class ResultsPanel:
         on: Callable,
         tell: Callable,
         compare: ComparePanel | None = None,
+        session: DashboardController | None = None,
+        viewer: RecordingsPanel | None = None,
     ) -> None:
+        """``session`` is the live session rows load into; ``viewer`` serves rows' recordings in rerun."""
         self.source, self._tell, self._compare_panel = source, tell, compare
+        self._session, self._viewer = session, viewer
         self._file: ResultFile | None = None
         self._other: ResultFile | None = None
+        self._compared: list[str] = []  # the files compared with the one shown, in the order picked
+        if viewer is not None:
+            viewer.add_folder("eval recordings", source.recordings_dir)
+            viewer.add_folder("re-runs", source.rerun_dir)
         self._shown: list[EpisodeRow] = []
         self._frames: list[bytes] = []  # PNG per step
         self._decisions: list[str] = []
@@ -96,8 +119,16 @@ class ResultsPanel:
             self.table = gui.add_html("")
             self.summary = gui.add_html("")
             self.episode = gui.add_dropdown("Episode", (NONE,))
-            self.actions = gui.add_button_group("Episode actions", ("Open", "Re-run live"))
+            self.actions = gui.add_button_group("Episode actions", ("Open", "Open in rerun", "Re-run live"))
+            self.rerun_link = gui.add_markdown("")
             self.step = gui.add_slider("Step", min=0, max=1, step=1, initial_value=0, disabled=True)
+            self.load_step = gui.add_number(
+                "Load at step", 0, min=0, step=1, hint="the step the episode loads at (follows the Step slider)"
+            )
+            self.live = gui.add_button_group(
+                "Live session", ("Load into session", "Take over by hand"), disabled=session is None
+            )
+            self.loaded = gui.add_markdown("")
             self.picture = gui.add_image(np.zeros((8, 8, 3), np.uint8), label="Recorded step")
             self.main_view = gui.add_checkbox(
                 "Recorded step in main view",
@@ -107,12 +138,15 @@ class ResultsPanel:
             self.large = gui.add_html("")
             self.decision = gui.add_markdown("")
             gui.add_markdown(RERUN_NOTE)
-            self.compare = gui.add_dropdown("Compare with", (NONE,) + self._file_names())
-            self.comparison = gui.add_markdown("")
+            self.compare = gui.add_dropdown(
+                "Compare with", (NONE,) + self._file_names(), hint="each file picked joins the comparison"
+            )
+            self.clear_comparison = gui.add_button("Clear comparison")
+            self.comparison = gui.add_html("")
             self.side_by_side = gui.add_button(
                 "Compare side by side",
                 disabled=compare is None,
-                hint="the selected episode in both files, step by step (Compare folder)",
+                hint="the selected episode in both files, step by step (Compare tab)",
             )
         self._wire(on)
         if self.file.value != NONE:
@@ -132,8 +166,11 @@ class ResultsPanel:
             self.episode,
             self.actions,
             self.step,
+            self.load_step,
+            self.live,
             self.main_view,
             self.compare,
+            self.clear_comparison,
             self.side_by_side,
         )
 
@@ -160,16 +197,34 @@ class ResultsPanel:
             row = self._selected()
             if self.actions.value == "Open":
                 self._open(row, event.client_id)
+            elif self.actions.value == "Open in rerun":
+                self.open_in_rerun(row, event.client_id)
             else:
                 self._rerun(row, event.client_id)
 
         @on(self.step)
         def _(event) -> None:
             self._show_step(int(self.step.value))
+            self.load_step.value = int(self.step.value)
+
+        @on(self.live)
+        def _(event) -> None:
+            if self.live.value == "Load into session":
+                self.load_into_session(self._selected(), int(self.load_step.value), event.client_id)
+            else:
+                self._live_session().take_over(client_id=event.client_id)
 
         @on(self.compare)
         def _(event) -> None:
-            self._compare(self.compare.value)
+            if self.compare.value != NONE and self.compare.value not in self._compared:
+                self._compared.append(self.compare.value)
+            self._compare()
+
+        @on(self.clear_comparison)
+        def _(event) -> None:
+            self._compared.clear()
+            self.compare.value = NONE
+            self._compare()
 
         @on(self.main_view)
         def _(event) -> None:
@@ -209,6 +264,7 @@ class ResultsPanel:
         self.filter.options = filter_choices(loaded.rows)
         self.filter.value = ALL
         self._show_table()
+        self._compare()
 
     def _show_table(self) -> None:
         if self._file is None:
@@ -245,18 +301,48 @@ class ResultsPanel:
         self._show_step(0)
         self._tell(client_id, f"opened {path.name}: {len(pictures)} steps")
 
+    def _recording(self, row: EpisodeRow) -> Path | None:
+        """The eval's recording of ``row``, else its newest re-run."""
+        s = self.source
+        return recording_of(s.recordings_dir, row) or recording_of(s.rerun_dir, row)
+
+    def open_in_rerun(self, row: EpisodeRow, client_id: int | None) -> str:
+        """Serve ``row``'s recording in rerun's web viewer (the Recordings folder's viewer) and link it here."""
+        if self._viewer is None:
+            raise L3MVNError("this dashboard has no rerun viewer to open recordings in")
+        path = self._recording(row)
+        if path is None:
+            raise L3MVNError(
+                f"no recording of {row.raw.get('key')} ({row.policy}) in {self.source.recordings_dir} or "
+                f"{self.source.rerun_dir}: press Re-run live to run and record it"
+            )
+        viewer = self._viewer.open_path(path, client_id)
+        self.rerun_link.content = f"**[Open {code(path.name)} in rerun]({viewer.url})** (a new tab)"
+        return viewer.url
+
+    def load_into_session(self, row: EpisodeRow, step: int, client_id: int | None) -> None:
+        """Load ``row``'s episode into the live session at ``step``, run with the line's stored config and
+        policy; the replay is checked against the row's recording when there is one."""
+        session = self._live_session()
+        if not 0 <= step <= row.steps:
+            raise L3MVNError(f"step {step} is outside this episode: it has steps 0 to {row.steps}")
+        start = episode_start(row.raw, self.source.episodes, recording=self._recording(row))
+        session.load(start, step, client_id=client_id)
+        self.large.content = ""  # the live session is what to look at now; scrubbing shows the recording again
+        self.loaded.content = md(
+            f"loading {row.raw.get('key')} ({row.policy}) at step {step} into the live session: then Step or "
+            "Run lets the policy go on, Take over by hand (or Policy teleop) drives it"
+        )
+
+    def _live_session(self) -> DashboardController:
+        if self._session is None:
+            raise L3MVNError("this Results panel has no live session to load episodes into")
+        return self._session
+
     def _rerun(self, row: EpisodeRow, client_id: int | None) -> None:
         s = self.source
         self._tell(client_id, f"re-running {row.raw.get('key')} ({row.policy}); this takes a few seconds")
-        done = rerun(
-            row.raw,
-            dataset=s.dataset,
-            split=s.split,
-            houses=s.houses,
-            episodes_per_house=s.episodes_per_house,
-            seed=s.seed,
-            record_dir=s.rerun_dir,
-        )
+        done = rerun(row.raw, s.episodes, record_dir=s.rerun_dir)
         self.decision.content = md(done.summary)
         self._tell(client_id, done.summary, "info" if done.reproduced else "warning")
         self._open(row, client_id, done.recording)
@@ -283,27 +369,33 @@ class ResultsPanel:
         self.large.content = ""
         self.decision.content = md(note)
 
-    def _compare(self, name: str) -> None:
-        if name == NONE or self._file is None:
+    def _compare(self) -> None:
+        """Compare the file shown with every file picked in Compare with (none: clear the comparison)."""
+        names = [n for n in self._compared if self._file is None or n != self._file.path.name]
+        if not names or self._file is None:
             self.comparison.content = ""
             self._other = None
             return
-        other = self._other = load_result_file(self.source.results_dir / name)
-        only_a, only_b = solved_by_one(self._file.rows, other.rows)
-        here = self._file.path.name
-        self.comparison.content = (
-            f"Solved by **{md(here)}** only ({len(only_a)}): "
-            + md(", ".join(str(r.raw["key"]) for r in only_a) or "none")
-            + f"\n\nSolved by **{md(name)}** only ({len(only_b)}): "
-            + md(", ".join(str(r.raw["key"]) for r in only_b) or "none")
-        )
+        try:
+            others = [load_result_file(self.source.results_dir / n) for n in names]
+            self._other = others[-1]
+            self.comparison.content = comparison_html(compare_files([self._file, *others]))
+        except L3MVNError as exc:
+            self.comparison.content = f"<i>{html(exc)}</i>"
+            raise
 
 
 def _number(v: float | None, digits: int = 2) -> str:
     return "-" if v is None else f"{v:.{digits}f}"
 
 
-_TABLE_STYLE = ("font-size:11px;border-collapse:collapse;white-space:nowrap", "padding:1px 4px;text-align:left")
+# Cells wrap (after '_', '/', '.' and '-' too: causes and file names are long single words) and the box
+# scrolls: no column is ever cut.
+_TABLE_STYLE = (
+    "font-size:11px;border-collapse:collapse",
+    "padding:1px 4px;text-align:left;vertical-align:top;overflow-wrap:break-word;border-bottom:1px solid #eee",
+)
+_BREAK_AFTER = re.compile(r"([_/]|[.-](?=[A-Za-z]))")  # never inside a number
 _COLUMNS = ("#", "scene", "ep", "goal", "ok", "SPL", "DTG", "steps", "cause", "cov")
 
 
@@ -311,11 +403,19 @@ def _html_table(head: tuple[str, ...], rows: list[tuple], caption: str = "") -> 
     table, cell = _TABLE_STYLE
     th = "".join(f"<th style='{cell}'>{html(h)}</th>" for h in head)
     body = "".join(
-        "<tr>" + "".join(f"<td style='{cell}'>{v if isinstance(v, _Raw) else html(str(v))}</td>" for v in row) + "</tr>"
+        "<tr>"
+        + "".join(f"<td style='{cell}'>{v if isinstance(v, _Raw) else _breakable(v)}</td>" for v in row)
+        + "</tr>"
         for row in rows
     )
     cap = f"<div style='font-size:12px;font-weight:600;margin-top:6px'>{html(caption)}</div>" if caption else ""
-    return f"{cap}<div style='overflow-x:auto'><table style='{table}'><tr>{th}</tr>{body}</table></div>"
+    return f"{cap}<div style='overflow:auto;max-height:420px'><table style='{table}'><tr>{th}</tr>{body}</table></div>"
+
+
+def _breakable(value: object) -> str:
+    """``value`` escaped, with a line-break opportunity after each '_' and '/', and each '.' and '-'
+    followed by a letter."""
+    return _BREAK_AFTER.sub(r"\1<wbr>", html(str(value)))
 
 
 class _Raw(str):
@@ -378,4 +478,67 @@ def _summary_html(rows: list[EpisodeRow]) -> str:
             "Per outcome",
         )
     )
+    return "".join(out)
+
+
+_MEASURE_NAMES = {"success": "SR", "spl": "SPL"}
+
+
+def _estimate(e) -> str:
+    return "-" if e.mean != e.mean else f"{e.mean:.2f} [{e.low:.2f}, {e.high:.2f}]"
+
+
+def comparison_html(c: FilesComparison) -> str:
+    """The comparison of several files: config differences first and prominently, then each file on the
+    shared episodes, the paired differences against the first, and the episodes one file solved alone."""
+    if c.config_notes:
+        items = "".join(f"<li>{html(n)}</li>" for n in c.config_notes)
+        head = (
+            "<div class='l3mvn-config-differs' style='border:2px solid #c86400;background:#fff1dc;"
+            "padding:4px 6px;font-size:12px'><b>Configs differ</b> (beside the policy): the numbers below "
+            f"compare more than the policies.<ul style='margin:2px 0 0 16px;padding:0'>{items}</ul></div>"
+        )
+    else:
+        head = "<div style='font-size:12px;color:#286428'>Same config in every file (beside the policy).</div>"
+    left = [f"{s.name}: {s.left_out}" for s in c.summaries if s.left_out]
+    scope = f"Compared on the {c.shared} episodes every file holds" + (
+        f"; left out (not in every file): {', '.join(left)}" if left else ""
+    )
+    level = f"{int(LEVEL * 100)}%"
+    out = [head, f"<div style='font-size:11px;margin-top:4px'>{html(scope)}</div>"]
+    out.append(
+        _html_table(
+            ("file", "policy", "SR", "SPL", "DTG (m)"),
+            [(s.name, s.policies, *(_estimate(s.measures[m]) for m in ("SR", "SPL", "DTG"))) for s in c.summaries],
+            f"Each file (mean [{level} interval])",
+        )
+    )
+    for p in c.pairings:
+        rows = [
+            (
+                group,
+                d.n,
+                _MEASURE_NAMES.get(d.measure, d.measure),
+                f"{d.mean_a:.2f}",
+                f"{d.mean_b:.2f}",
+                f"{d.mean:+.2f}",
+                f"[{d.low:+.2f}, {d.high:+.2f}]",
+                f"{d.wins} / {d.losses}",
+            )
+            for group, diffs in p.rows.items()
+            for d in diffs
+        ]
+        out.append(
+            _html_table(
+                ("category", "n", "", "A", "B", "B - A", f"{level} interval", "B better / worse"),
+                rows,
+                f"Paired differences: B = {p.b} against A = {c.names[0]}",
+            )
+        )
+    for name, only_a, only_b in c.solved_by_one:
+        out.append(
+            f"<div style='font-size:11px;margin-top:4px'>Solved by <b>{html(c.names[0])}</b> only vs "
+            f"{html(name)} ({len(only_a)}): {html(', '.join(only_a) or 'none')}<br>Solved by <b>{html(name)}</b> "
+            f"only ({len(only_b)}): {html(', '.join(only_b) or 'none')}</div>"
+        )
     return "".join(out)

@@ -127,6 +127,7 @@ def start_dashboard(
                 houses,
                 episodes_per_house,
                 seed,
+                None if scenes_dir is None else str(scenes_dir),
             )
         )
         episodes_source = EpisodeSource(

@@ -16,17 +16,19 @@ import math
 import queue
 import threading
 import time
-from collections.abc import Callable
-from dataclasses import replace
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from numbers import Real
 from pathlib import Path
+
+import numpy as np
 
 from l3mvn.agent.modular.teleop import TeleopAgent
 from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.config import Config, config_hash
 from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS, HEAD_SCORER
 from l3mvn.core.errors import L3MVNError
-from l3mvn.core.types import Action, Pose
+from l3mvn.core.types import Action, Pose, wrap_angle
 from l3mvn.run.events import EventBus, StepEvent
 from l3mvn.run.recording.catalogue import DEFAULT_RECORD_DIR, unique_tag
 from l3mvn.run.registry import (
@@ -45,9 +47,11 @@ from l3mvn.run.session import EpisodeSession, Steerable
 from l3mvn.run.viz import colorize_depth, colorize_semantic
 from l3mvn.world.datasets import EpisodeSet
 from l3mvn.world.episode import Episode
+from l3mvn.world.scenes.scene import SceneMap
 from l3mvn_studio.map_image import agent_map_view, ground_truth_view
 from l3mvn_studio.model_weights import scorer_problems
 from l3mvn_studio.state import Cell, Frames, Metrics, Notice, Snapshot
+from l3mvn_studio.step_rate import StepRate
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +59,23 @@ MIN_SPEED, MAX_SPEED = 0.5, 60.0
 DEFAULT_SCORER = "policy default"  # the scorer choice that keeps the policy's own
 DEFAULT_HEAD_CHOICE = f"default ({DEFAULT_HEAD})"  # the head choice that leaves policy.head unset
 MAX_QUEUED_STEPS = 5
-FRAME_WIDTH = 320  # camera frames are shown at most this wide
+FRAME_WIDTH = 320  # camera frames are shown this wide (larger ones subsampled, smaller ones enlarged)
+POSE_TOLERANCE = 1e-3  # metres and radians: a recording stores poses as float32
+
+
+@dataclass(frozen=True)
+class EpisodeStart:
+    """An episode to load into the live session, run as a result line says: its scene, its policy and
+    config, and the poses its recording holds per step (empty without one) to check the replay against.
+    The dashboard's own episode set need not hold it."""
+
+    dataset: str  # the name its recordings carry
+    scene: SceneMap
+    episode: Episode
+    policy: str
+    config: Config
+    stored_hash: str = ""  # the line's config hash ("" when it has none)
+    recorded: Mapping[int, Pose] = field(default_factory=dict)
 
 
 class DashboardController:
@@ -90,6 +110,10 @@ class DashboardController:
         self._swapped_live = False  # a scorer swapped into a warm policy mid-episode (see _runner_fits)
         self._session: EpisodeSession | None = None
         self._trajectory: list[Pose] = []
+        self._actions: list[Action] = []  # what moved the agent this episode: teleop replays them to take over
+        self._dataset = episodes.name  # the episode set of the episode shown (a loaded one may come from another)
+        self._loaded = False  # the episode shown was loaded from a result line (picking teleop takes it over)
+        self._quiet = range(0)  # steps stepped through without drawing (loading at a step, taking over)
         self._manual: Cell | None = None
         self._steered = False  # a person chose where the agent went in this episode (a manual goal)
         self._segment_note = ""
@@ -104,6 +128,7 @@ class DashboardController:
         self._current_job: int | None = None
         self._steps_pending = 0
         self._speed = _clamp_speed(steps_per_second)
+        self._rate = StepRate()  # what a Run achieves, said beside the asked speed
         self._seq = 0
         self._snapshot = Snapshot(
             seq=0,
@@ -220,6 +245,7 @@ class DashboardController:
             self._steps_pending += 1
 
         def drive_one() -> None:
+            self._rate.clear()
             self._require_running_episode().drive(chosen)
 
         self._submit("step", drive_one, client_id)
@@ -246,6 +272,7 @@ class DashboardController:
         with self._lock:
             was, self._running = self._running, False
             queued, self._run_queued = self._run_queued, False
+            self._rate.clear()
         if queued:
             self._notify("the queued Run is cancelled: the episode stays at step 0", client_id=client_id)
         if was or queued:
@@ -253,9 +280,23 @@ class DashboardController:
 
     def set_speed(self, steps_per_second: float) -> None:
         self._speed = _clamp_speed(steps_per_second)
+        self._rate.clear()  # the rate said is the one this speed gets
 
     def set_policy(self, name: str, *, client_id: int | None = None) -> None:
+        """The policy of the next Reset; picking teleop on an episode loaded from a result line (paused,
+        not over) hands that episode to teleop where it stands instead."""
         self.policy_name = check_policy(name)
+        session = self._session
+        if (
+            name == TELEOP
+            and self._loaded
+            and session is not None
+            and not session.done
+            and not self._running
+            and not isinstance(session.policy, TeleopAgent)
+        ):
+            self.take_over(client_id=client_id)
+            return
         self._notify(f"policy {name!r} takes effect on the next Reset", client_id=client_id)
         self._publish()  # the page says what the chosen policy will show (a map or not)
 
@@ -321,6 +362,48 @@ class DashboardController:
             if not view.contains(cell):
                 raise L3MVNError(f"cell {cell} is outside the {view.grid_shape[0]}x{view.grid_shape[1]} map")
         self._submit("manual goal", lambda: self._do_manual_goal(session, cell), client_id)
+
+    def load(self, start: EpisodeStart, step: int, *, client_id: int | None = None) -> None:
+        """Reset to ``start``'s episode under its own policy and config, step it to ``step`` without
+        drawing the steps between (the policy decides each one, as when it was recorded), then pause
+        there: Step and Run continue with the policy, ``take_over`` hands it to teleop."""
+        if not isinstance(step, int) or isinstance(step, bool) or step < 0:
+            raise L3MVNError(f"the step to load at must be a whole number from 0, not {step!r}")
+        check_policy(start.policy)
+        if start.policy == TELEOP:
+            raise L3MVNError(f"an episode of policy {TELEOP!r} cannot be replayed: its actions were given by hand")
+        with self._lock:
+            if self._reset_pending:
+                raise L3MVNError("a reset is already in progress (maybe from another tab); wait for it")
+            self._reset_pending, self._running, self._run_queued = True, False, False
+        self._submit(
+            "load",
+            lambda: self._do_load(start, step, client_id),
+            client_id,
+            busy=f"loading episode {start.episode.key} ({start.policy}) at step {step}",
+        )
+
+    def take_over(self, *, client_id: int | None = None) -> None:
+        """Teleop drives the episode on from where it stands: the agent is put back on its way by
+        replaying the actions taken so far (the map-based agent maps along), and the episode counts as
+        hand-steered."""
+        session = self._require_running_episode()
+        if isinstance(session.policy, TeleopAgent):
+            raise L3MVNError("the episode is already driven by hand: use the arrow keys / WASD or the Drive buttons")
+        if session.segment:
+            raise L3MVNError(f"teleop cannot take over after the target changed: pick Policy {TELEOP} and press Reset")
+        with self._lock:
+            if self._running:
+                raise L3MVNError("teleop takes over a paused episode: press Pause first")
+            if self._reset_pending:
+                raise L3MVNError("a reset is already in progress (maybe from another tab); wait for it")
+            self._reset_pending, self._run_queued = True, False
+        self._submit(
+            "load",
+            lambda: self._do_take_over(session),
+            client_id,
+            busy=f"teleop takes over at step {session.env.steps}",
+        )
 
     def change_target(self, goal: str, *, client_id: int | None = None) -> None:
         session = self._require_running_episode()
@@ -407,10 +490,11 @@ class DashboardController:
         finally:
             queued = False
             with self._lock:
-                if what == "reset":
+                if what in ("reset", "load"):
                     self._reset_pending = False
                     queued, self._run_queued = self._run_queued, False
-                    self._running = queued and not failed and not isinstance(self._session.policy, TeleopAgent)
+                    teleop = self._session is None or isinstance(self._session.policy, TeleopAgent)
+                    self._running = queued and not failed and not teleop
                 elif what == "step":
                     self._steps_pending -= 1
             if queued and failed:
@@ -419,6 +503,7 @@ class DashboardController:
                 self._publish(note="running" if self._running else self._snapshot.note)
 
     def _do_reset(self, episode: Episode) -> None:
+        self._rate.clear()
         scene = self.episodes.scene_of(episode)
         cfg = self._session_config(self.policy_name)
         self._stop_recorder()
@@ -435,12 +520,79 @@ class DashboardController:
                 self._notify(fallback, level="warning")
         # The same hash ``l3mvn eval`` writes for these settings, so dashboard runs can be matched.
         chash = config_hash(cfg, self.policy_name, self.seed)
-        self._session = self._runner.session(scene, self.policy_name, self.bus, config_hash=chash)
+        session = self._runner.session(scene, self.policy_name, self.bus, config_hash=chash)
+        self._begin(session, self.episodes.name, episode, loaded=False)
+        session.start(episode)
+
+    def _begin(self, session: EpisodeSession, dataset: str, episode: Episode, *, loaded: bool) -> None:
+        """Make ``session`` the one shown, with a fresh episode's state (and recording), before it starts."""
+        self._session, self._dataset, self._loaded = session, dataset, loaded
         self._manual, self._segment_note, self._steered = None, "", False
         if self.record:
-            self._start_recorder(episode)
-        self._trajectory = []
-        self._session.start(episode)
+            self._start_recorder(dataset, episode, session.policy_name)
+        self._trajectory, self._actions = [], []
+
+    def _do_load(self, start: EpisodeStart, step: int, client_id: int | None) -> None:
+        self._stop_recorder()
+        if self._swapped_live or self._runner.config != start.config:
+            self._runner.close()
+            self._runner, self._swapped_live = Runner(start.config, seed=self.seed), False
+        if reads_language(start.policy) and start.policy not in self._runner.floor(start.scene).policies:
+            self._set_busy(f"loading the language model of {start.policy}")
+        chash = config_hash(start.config, start.policy, self.seed)
+        session = self._runner.session(start.scene, start.policy, self.bus, config_hash=chash)
+        self._begin(session, start.dataset, start.episode, loaded=True)
+        self._quiet = range(1, step)  # its start is drawn: to the page, a new episode (fresh history, fitted map)
+        try:
+            session.start(start.episode)
+            while session.env.steps < step and not session.done:
+                session.step()
+        finally:
+            self._quiet = range(0)
+        key, at = start.episode.key, session.env.steps
+        notes = [f"loaded {key} ({start.policy}) at step {at}"]
+        if at < step:
+            notes.append(f"the episode ended at step {at}, before step {step}")
+        else:
+            notes.append(f"press Step or Run and {start.policy} goes on; pick Policy {TELEOP} to drive from here")
+        if start.stored_hash and start.stored_hash != chash:
+            notes.append("the config hash differs from the stored line's (another seed?): the replay may differ")
+        diverged = _divergence(start.recorded, self._trajectory)
+        if diverged:
+            notes.append(diverged)
+        self._notify(
+            "; ".join(notes),
+            level="warning" if diverged else "info",
+            client_id=client_id,
+            sticky=True,
+            title="Episode loaded",
+        )
+        self._publish(note=notes[0])
+
+    def _do_take_over(self, old: EpisodeSession) -> None:
+        assert old.episode is not None
+        actions, trajectory, loaded = list(self._actions), list(self._trajectory), self._loaded
+        self._stop_recorder()
+        session = self._runner.session(
+            old.task.scene, TELEOP, self.bus, config_hash=config_hash(self._runner.config, TELEOP, self.seed)
+        )
+        self._begin(session, self._dataset, old.episode, loaded=loaded)
+        self._steered = True
+        self._quiet = range(len(actions))  # the same walk goes on: its history stays
+        try:
+            session.start(old.episode)
+            for action in actions:
+                session.drive(action)
+        finally:
+            self._quiet = range(0)
+        recorded = dict(enumerate(trajectory))
+        diverged = _divergence(recorded, self._trajectory)
+        note = f"teleop took over {old.episode.key} at step {session.env.steps}: drive with the arrow keys / WASD"
+        self._notify(
+            note + (f"; {diverged}" if diverged else "") + "; the episode counts as steered by hand",
+            level="warning" if diverged else "info",
+        )
+        self._publish(note=note)
 
     def _scorer_of(self, policy: str) -> str | None:
         """The scorer a session of ``policy`` built now scores with (None: not a language policy)."""
@@ -492,6 +644,7 @@ class DashboardController:
         if session is not None and session.done:  # queued behind the step that ended the episode
             self._notify(_ended(session), client_id=client_id)
             return
+        self._rate.clear()
         self._require_running_episode().step()
 
     def _do_run_step(self) -> None:
@@ -499,6 +652,7 @@ class DashboardController:
         if session is None or session.done:
             self._running = False
             return
+        self._rate.add(time.monotonic())
         session.step()
         if session.done:
             self._running = False
@@ -535,14 +689,12 @@ class DashboardController:
         except L3MVNError as exc:
             self._notify(str(exc), level="warning", sticky=True, title="Scorer not applied")
 
-    def _start_recorder(self, episode: Episode) -> None:
+    def _start_recorder(self, dataset: str, episode: Episode, policy: str) -> None:
         """A recording of this run of ``episode`` under a name of its own: the session may run an
         episode many times, and the folder may hold an eval's recording of it (never replaced)."""
         from l3mvn.run.recording import Recorder
 
-        recorder = Recorder.for_episode(
-            self.record_dir, self.episodes.name, episode, self.policy_name, unique_tag("live")
-        ).attach(self.bus)
+        recorder = Recorder.for_episode(self.record_dir, dataset, episode, policy, unique_tag("live")).attach(self.bus)
         self._recorder_off = recorder.close
 
     def _stop_recorder(self) -> None:
@@ -557,6 +709,10 @@ class DashboardController:
         session = self._session
         assert session is not None
         self._trajectory.append(event.pose)
+        if event.action is not None:
+            self._actions.append(event.action)
+        if event.step in self._quiet and not event.done:
+            return  # stepping to the step an episode is loaded or taken over at: that step is drawn
         decision = event.decision
         if decision is not None and decision.map is not None:
             view = agent_map_view(decision, target=event.goal)
@@ -591,15 +747,20 @@ class DashboardController:
             note="",
             error=None,
             stepped_at=stepped_at,
+            achieved_steps_per_second=self._rate.per_second if self._running else None,
         )
 
     def _frames(self, event: StepEvent) -> Frames:
         obs = event.observation
-        k = max(1, obs.rgb.shape[1] // FRAME_WIDTH)
+        k, u = frame_display_steps(obs.rgb.shape[1])
+
+        def enlarged(img: np.ndarray) -> np.ndarray:
+            return img.repeat(u, axis=0).repeat(u, axis=1) if u > 1 else img
+
         return Frames(
-            rgb=obs.rgb[::k, ::k],
-            depth=colorize_depth(obs.depth[::k, ::k], self.cfg.sim.max_depth_m),
-            semantic=colorize_semantic(obs.semantic[::k, ::k], obs.categories),
+            rgb=enlarged(obs.rgb[::k, ::k]),
+            depth=enlarged(colorize_depth(obs.depth[::k, ::k], self.cfg.sim.max_depth_m)),
+            semantic=enlarged(colorize_semantic(obs.semantic[::k, ::k], obs.categories)),
         )
 
     def _publish(self, **changes) -> None:
@@ -653,6 +814,20 @@ class DashboardController:
         return session
 
 
+def _divergence(recorded: Mapping[int, Pose], replayed: list[Pose]) -> str:
+    """Where ``replayed`` (one pose per step from 0) first leaves ``recorded``; "" if it never does."""
+    for step, pose in enumerate(replayed):
+        was = recorded.get(step)
+        if was is None:
+            continue
+        if max(abs(pose.x - was.x), abs(pose.y - was.y), abs(wrap_angle(pose.heading - was.heading))) > POSE_TOLERANCE:
+            return (
+                f"the replay diverges from the recording at step {step}: recorded ({was.x:.2f}, {was.y:.2f}) "
+                f"heading {was.heading:.2f}, replayed ({pose.x:.2f}, {pose.y:.2f}) heading {pose.heading:.2f}"
+            )
+    return ""
+
+
 def _verdict(result: dict) -> str:
     return "SUCCESS" if result.get("success") else f"FAILURE ({result.get('failure') or 'not reached'})"
 
@@ -668,6 +843,13 @@ def _ended(session: EpisodeSession) -> str:
     assert session.episode is not None
     verdict = _verdict(session.result.to_json())
     return f"episode {session.episode.key} has ended ({verdict}): press Reset for the next one"
+
+
+def frame_display_steps(width: int) -> tuple[int, int]:
+    """(stride, enlargement) that bring a camera frame ``width`` pixels wide to about ``FRAME_WIDTH``:
+    a large frame is subsampled, a small one enlarged by whole pixels (blocky, not blurred: the page
+    shows what the agent saw)."""
+    return max(1, width // FRAME_WIDTH), max(1, FRAME_WIDTH // width)
 
 
 def check_speed(value: float) -> float:

@@ -144,6 +144,7 @@ class Snapshot:
     busy: str = ""  # what the worker is doing that holds the page's controls (a reset, a model load)
     run_queued: bool = False  # Run was pressed during a reset: it starts when the reset ends
     stepped_at: float = 0.0  # time.time() when the step's event arrived (latency measurements)
+    achieved_steps_per_second: float | None = None  # what the current Run gets (None when not running)
 
 
 @dataclass(frozen=True)

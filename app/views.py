@@ -1,9 +1,9 @@
-"""The viser page: shared controls in the side panel, the map as a textured plane in the 3D view.
+"""The viser page: the map as a textured plane in the 3D view, between a camera panel and the controls.
 
 This module lays the page out, wires each control to the controller, and keeps the controls in step
-with the controller's snapshots. What it draws with lives beside it: the side panel's text
-(``page_markdown``), the 3D view (``scene_drawing``), the thread that draws (``draw_loop``), notices
-(``tab_notices``) and the keyboard shortcuts (``key_shortcuts``).
+with the controller's snapshots. What it draws with lives beside it: where the panels sit
+(``page_layout``), the panels' text (``page_markdown``), the 3D view (``scene_drawing``), the thread
+that draws (``draw_loop``), notices (``tab_notices``) and the keyboard shortcuts (``key_shortcuts``).
 
 All handles are shared (``server.gui`` / ``server.scene``), so every tab shows the same session and a
 new or reloaded tab gets the current state from viser on connect. Only notices about a tab's own
@@ -35,6 +35,7 @@ from l3mvn_studio.draw_loop import DrawLoop
 from l3mvn_studio.history_view import HistoryPanel
 from l3mvn_studio.key_shortcuts import DRIVE_MD, SHORTCUTS_JS, SHORTCUTS_MD
 from l3mvn_studio.language_panel import language_html
+from l3mvn_studio.page_layout import MAP_AREA_JS, dock_panels
 from l3mvn_studio.page_markdown import (
     frontier_markdown,
     legend_html,
@@ -46,7 +47,13 @@ from l3mvn_studio.page_markdown import (
 from l3mvn_studio.recordings_view import RecordingsPanel
 from l3mvn_studio.results_view import ResultsPanel, ResultsSource
 from l3mvn_studio.scene_drawing import MapScene, clicked_cell
-from l3mvn_studio.session_worker import DEFAULT_SCORER, FRAME_WIDTH, MAX_SPEED, MIN_SPEED, DashboardController
+from l3mvn_studio.session_worker import (
+    DEFAULT_SCORER,
+    MAX_SPEED,
+    MIN_SPEED,
+    DashboardController,
+    frame_display_steps,
+)
 from l3mvn_studio.state import Cell, MapView, Snapshot
 from l3mvn_studio.tab_notices import TabNotices
 from l3mvn_studio.viser_hooks import check_gui_updates, ignore_client_messages_except, run_script_on_connect
@@ -59,6 +66,7 @@ BUTTONS_RUNNING = ("Reset", "Step", "Pause")
 RENDER_NOTE = (
     "_Frames from the built-in CPU simulator: flat-shaded boxes, not photographs. The agent sees exactly these._"
 )
+PAIR_GAP = 4  # px between the depth and semantic frames
 # Policy teleop: button -> action; key_shortcuts' drive keys press the buttons (only while they are shown).
 DRIVE = {
     "Turn left": "turn_left",
@@ -84,26 +92,33 @@ class DashboardView:
         self.notices = TabNotices(server)
         self._drawn: tuple = (None, None)  # (event, manual goal) the map was last drawn for
         self._frontier_cells: dict[str, Cell] = {}  # the Frontier dropdown's labels -> their cells
-        self._build_gui()
-        self.compare = (
-            None
-            if compare is None
-            else ComparePanel(
-                server.gui,
-                compare,
-                config=controller.cfg,
-                record_dir=controller.record_dir,
-                current_policy=controller.policy_name,
-                selected_episode=self._selected_episode,
-                on=self._on,
-                tell=self.notices.tell,
-            )
-        )
-        self.results = (
-            None
-            if results is None
-            else ResultsPanel(server.gui, results, on=self._on, tell=self.notices.tell, compare=self.compare)
-        )
+        tabs = self._build_gui(results=results is not None, compare=compare is not None)
+        self.compare: ComparePanel | None = None
+        if compare is not None:
+            with tabs["Compare"]:
+                self.compare = ComparePanel(
+                    server.gui,
+                    compare,
+                    config=controller.cfg,
+                    record_dir=controller.record_dir,
+                    current_policy=controller.policy_name,
+                    selected_episode=self._selected_episode,
+                    on=self._on,
+                    tell=self.notices.tell,
+                    overlay=self._overlays,
+                )
+        self.results: ResultsPanel | None = None
+        if results is not None:
+            with tabs["Results"]:
+                self.results = ResultsPanel(
+                    server.gui,
+                    results,
+                    on=self._on,
+                    tell=self.notices.tell,
+                    compare=self.compare,
+                    session=controller,
+                    viewer=self.recordings,
+                )
         self.map_scene = MapScene(server)
         server.scene.on_click()(self._reported("map click", self._on_map_click))
         panel_inputs = (
@@ -123,6 +138,7 @@ class DashboardView:
         )
         ignore_client_messages_except(server, "GuiUpdateMessage", "ScenePointerMessage")  # controls, map clicks
         run_script_on_connect(server, SHORTCUTS_JS)
+        run_script_on_connect(server, MAP_AREA_JS)
         self._draws = DrawLoop(self._draw, name="l3mvn-dashboard-view")
         controller.on_snapshot(self._draws.offer)
         controller.on_snapshot(self.history.add)
@@ -135,80 +151,105 @@ class DashboardView:
         self.history.close()
 
     # --- layout ------------------------------------------------------------------------------
-    def _build_gui(self) -> None:
+    def _build_gui(self, *, results: bool, compare: bool) -> dict[str, viser.GuiTabHandle]:
+        """The page: the map fills what the two docked panels leave free. The camera panel (left) and,
+        atop the control panel (right), Status with the buttons that drive the episode never scroll
+        away: the keys press those buttons, so they must exist whichever tab is open. Everything else
+        is a tab below them, so each gets the panel's full height. Returns the tabs the caller fills
+        with its own panels."""
         gui, ctl = self.server.gui, self.ctl
         gui.configure_theme(control_width="large", show_share_button=False, brand_color=(40, 90, 200))
-        gui.add_markdown("**L3MVN Studio**: language-guided ObjectNav, live")
         first = ctl.episodes_of(ctl.scene_keys[0])[0]
-        with gui.add_folder("Episode"):
-            self.scene = gui.add_dropdown("Scene", ctl.scene_keys)
-            self.episode = gui.add_dropdown("Episode", self._episode_labels(ctl.scene_keys[0]))
-            self.target = gui.add_dropdown(
-                "Target",
-                GOAL_CATEGORIES,
-                initial_value=first.goal,
-                hint="the episode's goal; changing it mid-episode starts a new segment",
-            )
-            self.policy = gui.add_dropdown(
-                "Policy", policy_names(), initial_value=ctl.policy_name, hint="takes effect on the next Reset"
-            )
-            self.scorer = gui.add_dropdown(
-                "Scorer",
-                (DEFAULT_SCORER,) + ctl.scorer_names(),
-                hint="language policies only; 'policy default' restores theirs on Reset",
-            )
-            self.scorer_note = gui.add_markdown(unavailable_markdown(ctl.unavailable_scorers))
-            self.head = gui.add_dropdown(
-                "Head",
-                ctl.head_names(),
-                initial_value=ctl.head,
-                hint=f"feed-forward scoring only ({', '.join(ctl.headed_policies())} "
-                "or Scorer feedforward); other scorers ignore it; takes effect on "
-                "the next Reset",
-            )
-            self.controls = gui.add_button_group("Controls", BUTTONS_PAUSED)
-            self.speed = gui.add_slider(
-                "Steps / s", min=MIN_SPEED, max=MAX_SPEED, step=0.5, initial_value=ctl.snapshot.steps_per_second
-            )
-            self.record = gui.add_checkbox("Record (.rrd)", False, hint="rerun recording of each new episode")
-            gui.add_markdown(SHORTCUTS_MD)
+        with gui.add_folder("Status"):
+            self.status = gui.add_markdown("")
+            self.metrics = gui.add_markdown("")
+        self.controls = gui.add_button_group("Controls", BUTTONS_PAUSED)
         with gui.add_folder("Drive (policy teleop)", visible=ctl.policy_name == TELEOP) as self.drive_folder:
             self.drive_turns = gui.add_button_group("Drive", ("Turn left", "Forward", "Turn right"))
             self.drive_other = gui.add_button_group("Look / stop", ("Look up", "Look down", "Stop"))
             gui.add_markdown(DRIVE_MD)
-        with gui.add_folder("Status"):
-            self.status = gui.add_markdown("")
-            self.metrics = gui.add_markdown("")
-            self.fit = gui.add_button("Fit map in view")
-            self.auto_fit = gui.add_checkbox("Auto-fit map", True, hint="refit the view whenever the map outgrows it")
-            self.ground_truth = gui.add_checkbox(
-                "Ground truth",
-                False,
-                hint="overlay what the agent does not know: the whole floor plan, the success region and "
-                "the true goal instances (magenta)",
-            )
-        with gui.add_folder("Camera"):
-            blank = self._placeholder_frame()
-            self.rgb = gui.add_image(blank, label="RGB")
-            self.depth = gui.add_image(blank, label="Depth (near blue, far red)")
-            self.semantic = gui.add_image(blank, label="Semantic (map colours)")
-            gui.add_markdown(RENDER_NOTE)
-        with gui.add_folder("Frontiers"):
-            self.frontier_pick = gui.add_dropdown("Frontier", ("none",), disabled=True)
-            self.goal_buttons = gui.add_button_group("Manual goal", ("Go to frontier", "Clear"))
-            self.frontier_table = gui.add_markdown(no_map_markdown(ctl.policy_name, started=False))
-        with gui.add_folder("Language"):
+        group = gui.add_tab_group()
+        names = ("Episode", "Language") + ("Results",) * results + ("Compare",) * compare + ("Recordings",)
+        tabs = {name: group.add_tab(name) for name in names}
+        with tabs["Episode"]:
+            self._build_episode_controls(first.goal)
+        with tabs["Language"]:
             self.language = gui.add_html(language_html(None, ctl.policy_name))
-        self.history = HistoryPanel(gui, on=self._on, tell=self.notices.tell)
-        self.recordings = RecordingsPanel(
-            gui, lambda: ctl.record_dir, self.server.get_host(), on=self._on, tell=self.notices.tell
-        )
-        with gui.add_folder("Legend"):
-            self.legend = gui.add_html(legend_html(legend(GOAL_CATEGORIES), target=first.goal))
+        with tabs["Recordings"]:
+            self.recordings = RecordingsPanel(
+                gui, lambda: ctl.record_dir, self.server.get_host(), on=self._on, tell=self.notices.tell
+            )
+        # Pictures drawn over the map live here, outside the tabs: a hidden tab's content is not drawn.
+        self._overlays = gui.add_folder(None)
+        dock_panels(gui, self._build_camera_panel(first.goal))
         self._listed_episodes = 0
         # Held while the worker resets or loads a model: a change then would apply to a half-built session.
         self._held = (self.scene, self.episode, self.target, self.policy, self.scorer, self.head, self.record)
         self._wire_gui()
+        return tabs
+
+    def _build_episode_controls(self, goal: str) -> None:
+        gui, ctl = self.server.gui, self.ctl
+        self.scene = gui.add_dropdown("Scene", ctl.scene_keys)
+        self.episode = gui.add_dropdown("Episode", self._episode_labels(ctl.scene_keys[0]))
+        self.target = gui.add_dropdown(
+            "Target",
+            GOAL_CATEGORIES,
+            initial_value=goal,
+            hint="the episode's goal; changing it mid-episode starts a new segment",
+        )
+        self.policy = gui.add_dropdown(
+            "Policy", policy_names(), initial_value=ctl.policy_name, hint="takes effect on the next Reset"
+        )
+        self.scorer = gui.add_dropdown(
+            "Scorer",
+            (DEFAULT_SCORER,) + ctl.scorer_names(),
+            hint="language policies only; 'policy default' restores theirs on Reset",
+        )
+        self.scorer_note = gui.add_markdown(unavailable_markdown(ctl.unavailable_scorers))
+        self.head = gui.add_dropdown(
+            "Head",
+            ctl.head_names(),
+            initial_value=ctl.head,
+            hint=f"feed-forward scoring only ({', '.join(ctl.headed_policies())} "
+            "or Scorer feedforward); other scorers ignore it; takes effect on "
+            "the next Reset",
+        )
+        self.speed = gui.add_slider(
+            "Steps / s", min=MIN_SPEED, max=MAX_SPEED, step=0.5, initial_value=ctl.snapshot.steps_per_second
+        )
+        self.record = gui.add_checkbox("Record (.rrd)", False, hint="rerun recording of each new episode")
+        gui.add_markdown(SHORTCUTS_MD)
+        with gui.add_folder("Frontiers"):
+            self.frontier_pick = gui.add_dropdown("Frontier", ("none",), disabled=True)
+            self.goal_buttons = gui.add_button_group("Manual goal", ("Go to frontier", "Clear"))
+            self.frontier_table = gui.add_markdown(no_map_markdown(ctl.policy_name, started=False))
+
+    def _build_camera_panel(self, goal: str) -> viser.PanelHandle:
+        """What the agent sees and how to read the map, beside the map: RGB at its own size, depth and
+        semantics side by side at half of it, the map's switches and legend, and the look back over
+        the episode's steps (its pictures cover the map, so it lives with what it covers)."""
+        gui = self.server.gui
+        panel = gui.add_panel()
+        with panel.add_tab("Camera"):
+            rgb, pair = self._placeholder_frames()
+            self.rgb = gui.add_image(rgb, label="RGB")
+            self.depth_semantic = gui.add_image(pair, label="Depth (near blue, far red) | Semantic (map colours)")
+            gui.add_markdown(RENDER_NOTE)
+            with gui.add_folder("Map"):
+                self.fit = gui.add_button("Fit map in view")
+                self.auto_fit = gui.add_checkbox(
+                    "Auto-fit map", True, hint="refit the view whenever the map outgrows it"
+                )
+                self.ground_truth = gui.add_checkbox(
+                    "Ground truth",
+                    False,
+                    hint="overlay what the agent does not know: the whole floor plan, the success region and "
+                    "the true goal instances (magenta)",
+                )
+                self.legend = gui.add_html(legend_html(legend(GOAL_CATEGORIES), target=goal))
+            self.history = HistoryPanel(gui, on=self._on, tell=self.notices.tell)
+        return panel
 
     def _wire_gui(self) -> None:
         ctl = self.ctl
@@ -432,8 +473,7 @@ class DashboardView:
             self.target.value = snap.event.goal
         if snap.frames is not None:
             self.rgb.image = snap.frames.rgb
-            self.depth.image = snap.frames.depth
-            self.semantic.image = snap.frames.semantic
+            self.depth_semantic.image = _side_by_side(snap.frames.depth, snap.frames.semantic)
         self.map_scene.draw(
             snap, session=self.ctl.session, ground_truth=self.ground_truth.value, auto_fit=self.auto_fit.value
         )
@@ -441,7 +481,9 @@ class DashboardView:
         if view is not None:
             self._offer_frontiers(view)
             self.frontier_table.content = frontier_markdown(view)
-            self.legend.content = legend_html(view.legend, target=view.target, ground_truth=self.ground_truth.value)
+            self.legend.content = legend_html(
+                view.legend, target=view.target, ground_truth=self.ground_truth.value, frontiers=view.frontiers
+            )
         elif snap.event is not None:
             self.frontier_pick.options, self.frontier_pick.disabled = ("none",), True
             # A new episode before its first map: the last episode's legend (its categories, its target)
@@ -467,11 +509,12 @@ class DashboardView:
         episode_id = self._episode_id(self.episode.value)
         return next(ep for ep in self.ctl.episodes_of(self.scene.value) if ep.episode_id == episode_id)
 
-    def _placeholder_frame(self) -> np.ndarray:
-        """A dark frame of the camera's display size (not a 16-px square) until the first one arrives."""
+    def _placeholder_frames(self) -> tuple[np.ndarray, np.ndarray]:
+        """Dark frames of the camera's display size (not 16-px squares) until the first ones arrive:
+        the RGB one says what to do, the depth-and-semantic pair is blank."""
         sim = self.ctl.cfg.sim
-        k = max(1, sim.frame_width // FRAME_WIDTH)
-        h, w = -(-sim.frame_height // k), -(-sim.frame_width // k)
+        k, u = frame_display_steps(sim.frame_width)
+        h, w = -(-sim.frame_height // k) * u, -(-sim.frame_width // k) * u
         img = np.full((h, w, 3), 48, np.uint8)
         cv2.putText(
             img,
@@ -483,7 +526,8 @@ class DashboardView:
             1,
             cv2.LINE_AA,
         )
-        return img
+        blank = np.full((h, w, 3), 48, np.uint8)
+        return img, _side_by_side(blank, blank)
 
     @staticmethod
     def _episode_id(label: str) -> int:
@@ -491,3 +535,11 @@ class DashboardView:
         if not head.strip().isdigit():
             raise L3MVNError(f"unknown episode {label!r}: pick one from the list")
         return int(head)
+
+
+def _side_by_side(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """Two frames of one size at half that size in one image, about as wide as one frame, a thin light
+    gap between them. Every other pixel, not an average: semantic colours stay the legend's."""
+    left, right = left[::2, ::2], right[::2, ::2]
+    gap = np.full((left.shape[0], PAIR_GAP, 3), 255, np.uint8)
+    return np.hstack((left, gap, right))

@@ -23,7 +23,7 @@ import pytest
 sync_api = pytest.importorskip("playwright.sync_api")
 
 from conftest import free_port, serve_dashboard
-from test_dashboard_browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_text, _wait
+from test_dashboard_browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _open_tab, _panel_text, _wait
 
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None, reason="no chromium: `apt install chromium` or `playwright install chromium` runs these tests"
@@ -75,7 +75,10 @@ def _shown_picture(page) -> np.ndarray:
 
 
 def test_compare_two_policies_step_by_step(dash, page):
-    page.get_by_text("Compare", exact=True).first.click()
+    _open_tab(page, "Compare")
+    _wait(lambda: page.get_by_text("Compare", exact=True).count() >= 2, what="the Compare folder in its tab")
+    if not page.get_by_role("button", name="Run both").is_visible():  # the folder starts folded
+        page.get_by_text("Compare", exact=True).last.click()
     page.get_by_role("button", name="Run both").wait_for()
     assert page.locator("input[value='frontier']").count() >= 1  # A: the dashboard's policy
     assert page.locator("input[value='cost-utility']").count() >= 1  # B: the default
@@ -188,6 +191,7 @@ def results_dash(tmp_path_factory):
 def test_compare_side_by_side_from_two_result_files(results_dash, page_factory):
     page = page_factory(results_dash)
     results, compare = results_dash.view.results, results_dash.view.compare
+    _open_tab(page, "Results")
     _wait(lambda: "Per category" in _panel_text(page), timeout=30, what="the Results panel")
     page.locator("input[value='(none)']:visible").first.click()
     page.get_by_role("option", name="frontier.jsonl", exact=True).click()
@@ -206,5 +210,5 @@ def test_compare_side_by_side_from_two_result_files(results_dash, page_factory):
     _wait(lambda: page.locator(".l3mvn-main-view img.l3mvn-picture").count() > 0, what="the compare picture")
     fresh = compare_recordings(c.a.recording, c.b.recording, c.episode_key)
     _wait(lambda: np.array_equal(_shown_picture(page), fresh.picture(0)), timeout=30, what="step 0 of both")
-    assert page.locator(".l3mvn-main-view").first.is_visible()  # drawn over the main view, folder open or not
+    assert page.locator(".l3mvn-main-view").first.is_visible()  # drawn over the main view, Compare tab open or not
     page.screenshot(path=str(page.shots / "dashboard_compare_from_results.png"))

@@ -53,7 +53,7 @@ def test_reset_publishes_step_zero_of_the_chosen_episode_and_draws_its_map(ctl):
     assert ctl.events[-1].episode_key == ep.key and ctl.events[-1].step == 0
     assert snap.event is ctl.events[-1] and snap.error is None
     assert snap.map is not None and snap.map.source == "ground truth"  # oracle keeps no map
-    assert snap.frames is not None and snap.frames.rgb.shape == (120, 160, 3)
+    assert snap.frames is not None and snap.frames.rgb.shape == (240, 320, 3)  # 120x160, shown twice as large
 
 
 def test_step_advances_exactly_one_step(ctl):

@@ -66,6 +66,11 @@ def _panel_text(page) -> str:
     return page.locator("body").inner_text()
 
 
+def _open_tab(page, name: str) -> None:
+    """Open the control panel's tab ``name``: only the open tab's controls are on the page."""
+    page.get_by_role("tab", name=name, exact=True).click()
+
+
 def _step_shown(page) -> int | None:
     m = re.search(r"Step (\d+), action", _panel_text(page))
     return int(m.group(1)) if m else None
@@ -124,8 +129,9 @@ def test_step_and_frontier_click_in_a_real_browser(dash, tmp_path):
             time.sleep(1.0)
             page.screenshot(path=str(shots / "dashboard.png"))
 
-            # A click off the map is refused with a message, and nothing changes.
-            page.mouse.click(40, VIEWPORT["height"] - 150)
+            # A click off the map (below it, in the map's canvas) is refused with a message, and nothing changes.
+            box = page.locator("canvas").first.bounding_box()
+            page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] - 100)
             page.get_by_text("outside the map").first.wait_for(timeout=5_000)
 
             target = view.frontiers[0]

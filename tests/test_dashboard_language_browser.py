@@ -22,6 +22,7 @@ from test_dashboard_browser import (  # noqa: E402  (after the skip: it needs pl
     CHROMIUM,
     CHROMIUM_ARGS,
     VIEWPORT,
+    _open_tab,
     _panel_text,
     _step_shown,
     _wait,
@@ -64,6 +65,7 @@ def _language_page(url: str) -> Iterator:
             page.set_default_timeout(60_000)
             page.goto(url)
             page.wait_for_selector("canvas", timeout=20_000)
+            _open_tab(page, "Language")
             yield page
         finally:
             browser.close()
@@ -103,9 +105,6 @@ def test_the_language_folder_shows_bars_and_the_fusion_rule_of_the_choice(dash, 
         width = bars.first.evaluate("e => e.getBoundingClientRect().width")
         assert width == pytest.approx(BAR_PX * chosen.llm_scores[view.target], abs=1.0)
         assert page.locator("span[data-goal]").count() == 6 * bars.count()  # every goal on every card
-        for folder in ("Camera", "Frontiers"):  # folded, so the screenshot shows the Language folder whole
-            page.get_by_text(folder, exact=True).first.click()
-        page.get_by_text("Language", exact=True).first.evaluate("e => e.scrollIntoView({block: 'start'})")
         page.wait_for_timeout(500)
         page.screenshot(path=str(shots / "dashboard_language_panel.png"))
 
@@ -141,13 +140,13 @@ def test_the_language_folder_shows_ponis_potentials_like_a_language_models_score
         chosen = next(f for f in view.frontiers if f.chosen)
         assert f"★ F{chosen.id} (chosen)" in text and "object potential PONI predicts" in text
         assert f"potential {chosen.s_llm:.2f}" in text
-        assert "S_LLM" not in text  # the Frontiers table names its column "potential" too
+        assert "S_LLM" not in text  # nor the Frontiers table (Episode tab, below), whose column is "potential" too
         assert all(f.label.startswith(f"F{f.id}  pot ") for f in view.frontiers)  # and the map's labels
         metres = chosen.expected_m[view.target]
         assert f"{chosen.llm_scores[view.target]:.2f} {metres:.1f} m" in text  # the bar's value and its metres
         assert page.locator("span[data-goal]").count() % 6 == 0 and page.locator("span[data-goal]").count() >= 6
-        for folder in ("Camera", "Frontiers"):
-            page.get_by_text(folder, exact=True).first.click()
-        page.get_by_text("Language", exact=True).first.evaluate("e => e.scrollIntoView({block: 'start'})")
         page.wait_for_timeout(500)
         page.screenshot(path=str(shots / "dashboard_poni_panel.png"))
+        _open_tab(page, "Episode")
+        _wait(lambda: "potential" in _panel_text(page), what="the Frontiers table")
+        assert "S_LLM" not in _panel_text(page)

@@ -17,7 +17,7 @@ import pytest
 sync_api = pytest.importorskip("playwright.sync_api")
 
 from conftest import free_port
-from test_dashboard_browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _panel_text, _wait
+from test_dashboard_browser import CHROMIUM, CHROMIUM_ARGS, VIEWPORT, _open_tab, _panel_text, _wait
 
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None, reason="no chromium: `apt install chromium` or `playwright install chromium` runs these tests"
@@ -99,6 +99,7 @@ def test_markup_from_result_files_and_recordings_stays_text(dash, tmp_path):
         page.goto(dash.url)
         page.wait_for_selector("canvas", timeout=20_000)
         title = page.title()
+        _open_tab(page, "Results")
         _wait(lambda: "Per category" in _panel_text(page), timeout=30, what="the Results panel")
         panel = dash.view.results
         assert panel._file is not None and panel._file.path.name == FILE_NAME
@@ -108,15 +109,21 @@ def test_markup_from_result_files_and_recordings_stays_text(dash, tmp_path):
         _wait(lambda: "Solved by" in _panel_text(page), timeout=30, what="the comparison")
         page.get_by_role("button", name="Open", exact=True).click()  # no recording: a note naming the episode
         _wait(lambda: "no recording of" in _panel_text(page), timeout=30, what="the note of a missing recording")
-        _wait(lambda: "newest first" in _panel_text(page), timeout=30, what="the recordings list")
-        page.mouse.move(700, 300)
-        page.wait_for_timeout(1000)  # an onerror or a srcdoc frame would have run by now
-        text = _panel_text(page)
-        traces = _traces(page)
+        tabs = {}  # each tab's text and traces: only the open tab's content is on the page
+        for tab in ("Results", "Recordings"):
+            _open_tab(page, tab)
+            if tab == "Recordings":
+                _wait(lambda: "newest first" in _panel_text(page), timeout=30, what="the recordings list")
+            page.mouse.move(700, 300)
+            page.wait_for_timeout(1000)  # an onerror or a srcdoc frame would have run by now
+            tabs[tab] = (_panel_text(page), _traces(page))
         page.screenshot(path=str(Path(os.environ.get("L3MVN_SCREENSHOTS", tmp_path)) / "dashboard_markup.png"))
         browser.close()
 
-    assert traces == {"xss": None, "marked": 0, "frames": 0, "scripts": 0, "links": 0, "title": title}, traces
+    clean = {"xss": None, "marked": 0, "frames": 0, "scripts": 0, "links": 0, "title": title}
+    for tab, (_, traces) in tabs.items():
+        assert traces == clean, (tab, traces)
+    text = "\n".join(shown for shown, _ in tabs.values())
     assert dialogs == []
     # The same characters are on the page as text: in the file name, the table, the notes, the
     # comparison, the missing-recording note and the recordings list.

@@ -16,6 +16,7 @@ from conftest import free_port
 
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.recording import read_recording
+from l3mvn_studio.compare import EpisodeSource
 from l3mvn_studio.map_image import png_rgb
 from l3mvn_studio.page_text import md
 from l3mvn_studio.results import (
@@ -32,6 +33,7 @@ from l3mvn_studio.results import (
 )
 
 HOUSES, PER_HOUSE, SEED = 1, 3, 0
+SOURCE = EpisodeSource(None, "val", HOUSES, PER_HOUSE, SEED)  # the episode set the evals here ran
 EVAL = [
     "--houses",
     str(HOUSES),
@@ -135,11 +137,7 @@ def test_rerun_with_the_stored_config_and_seed_gives_the_stored_result(evaluated
     for row in load_result_file(evaluated / "frontier.jsonl").rows:
         done = rerun(
             row.raw,
-            dataset=None,
-            split="val",
-            houses=HOUSES,
-            episodes_per_house=PER_HOUSE,
-            seed=SEED,
+            SOURCE,
             record_dir=tmp_path,
         )
         assert done.same_config and done.reproduced, done.summary
@@ -148,9 +146,7 @@ def test_rerun_with_the_stored_config_and_seed_gives_the_stored_result(evaluated
         assert done.recording.parent == tmp_path and read_recording(done.recording).steps[-1] == row.steps
         made.append(done.recording)
     edited = {**row.raw, "config": {**row.raw["config"], "sim": {**row.raw["config"]["sim"], "max_steps": 5}}}
-    other = rerun(
-        edited, dataset=None, split="val", houses=HOUSES, episodes_per_house=PER_HOUSE, seed=SEED, record_dir=tmp_path
-    )
+    other = rerun(edited, SOURCE, record_dir=tmp_path)
     made.append(other.recording)
     assert sorted(tmp_path.glob("*.rrd")) == sorted(made) and len(set(made)) == len(made)  # one new file each
     assert not other.same_config and not other.reproduced and other.row["steps"] <= 5
@@ -158,21 +154,13 @@ def test_rerun_with_the_stored_config_and_seed_gives_the_stored_result(evaluated
     with pytest.raises(L3MVNError, match="is not in this dashboard's episode set"):
         rerun(
             {**row.raw, "key": "procedural-0099/0/0"},
-            dataset=None,
-            split="val",
-            houses=HOUSES,
-            episodes_per_house=PER_HOUSE,
-            seed=SEED,
+            SOURCE,
             record_dir=tmp_path,
         )
     with pytest.raises(L3MVNError, match="stores no config"):
         rerun(
             {k: v for k, v in row.raw.items() if k != "config"},
-            dataset=None,
-            split="val",
-            houses=HOUSES,
-            episodes_per_house=PER_HOUSE,
-            seed=SEED,
+            SOURCE,
             record_dir=tmp_path,
         )
 
@@ -292,3 +280,64 @@ def test_hostile_files_in_the_results_folder_neither_crash_nor_hang_the_dashboar
         assert "nested deeper" in problems[3] and "longer than" in problems[4]
     finally:
         dash.stop()
+
+
+def test_several_files_compare_with_their_config_differences_first(evaluated, tmp_path):
+    """Issue 34: a file run with another max_steps is said to differ before any number; episodes not in
+    every file are counted and left out of the pairing; the page escapes what the files hold."""
+    from l3mvn_studio.results_comparison import compare_files
+    from l3mvn_studio.results_view import comparison_html
+
+    lines = [json.loads(x) for x in (evaluated / "frontier.jsonl").read_text().splitlines()]
+    longer = [{**r, "config": {**r["config"], "sim": {**r["config"]["sim"], "max_steps": 250}}} for r in lines[1:]]
+    longer[0]["policy"] = "<b>frontier</b>"
+    (tmp_path / "longer.jsonl").write_text("".join(json.dumps(r) + "\n" for r in longer))
+    files = [load_result_file(p) for p in (evaluated / "frontier.jsonl", tmp_path / "longer.jsonl")]
+    files.append(load_result_file(evaluated / "cost-utility.jsonl"))
+    c = compare_files(files, resamples=200)
+    assert c.config_notes[0] == "longer.jsonl: sim.max_steps: 40 -> 250"
+    assert c.shared == len(lines) - 1 and [s.left_out for s in c.summaries] == [1, 0, 1]
+    assert [p.b for p in c.pairings] == ["longer.jsonl", "cost-utility.jsonl"]
+    assert all(d.n == c.shared for p in c.pairings for d in p.rows["all"])
+    sr = c.summaries[0].measures["SR"]
+    assert sr.low <= sr.mean <= sr.high and set(c.summaries[0].measures) == {"SR", "SPL", "DTG"}
+    page = comparison_html(c)
+    assert page.index("Configs differ") < page.index("Paired differences") < page.index("Solved by")
+    assert "max_steps: 40 -&gt; 250" in page and "<b>frontier</b>" not in page
+    with pytest.raises(L3MVNError, match="at least two result files"):
+        compare_files(files[:1])
+
+
+def test_the_results_table_shows_every_column_in_full(evaluated):
+    from l3mvn_studio.results_view import _table_html
+
+    rows = load_result_file(evaluated / "frontier.jsonl").rows
+    table = _table_html(list(rows))
+    assert "nowrap" not in table and "overflow-wrap:break-word" in table and "overflow:auto" in table
+    assert ">cause</th>" in table and ">cov</th>" in table
+    for r in rows:
+        assert f">{r.failure.replace('_', '_<wbr>')}</td>" in table and f">{r.coverage:.2f}</td>" in table
+
+
+def test_a_result_line_becomes_an_episode_start_with_its_recorded_poses(evaluated):
+    from l3mvn_studio.results import episode_start, recorded_poses
+
+    row = load_result_file(evaluated / "frontier.jsonl").rows[0]
+    path = recording_of(evaluated / "rec", row)
+    poses = recorded_poses(path)
+    assert sorted(poses) == list(range(row.steps + 1))
+    start = episode_start(row.raw, SOURCE, recording=path)
+    assert start.episode.key == row.raw["key"] and start.policy == row.policy and start.recorded == poses
+    assert start.config.sim.max_steps == 40 and start.stored_hash == row.raw["config_hash"]
+    with pytest.raises(L3MVNError, match="is not in this dashboard's episode set"):
+        episode_start(
+            {**row.raw, "key": "procedural-0099/0/0"},
+            SOURCE,
+        )
+    broken = evaluated / "broken.rrd"
+    broken.write_bytes(b"not a recording")
+    try:
+        with pytest.raises(L3MVNError, match="broken.rrd"):
+            recorded_poses(broken)
+    finally:
+        broken.unlink()

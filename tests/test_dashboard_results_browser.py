@@ -90,9 +90,18 @@ def page(dash, tmp_path):
         page.shots = Path(os.environ.get("L3MVN_SCREENSHOTS", tmp_path))
         page.goto(dash.url)
         page.wait_for_selector("canvas", timeout=20_000)
+        _open_results_tab(page)
         _wait(lambda: "Per category" in _panel_text(page), timeout=30, what="the Results panel")
         yield page
         browser.close()
+
+
+def _open_results_tab(page) -> None:
+    """The Results panel is a tab of its own where the page has tabs (hidden text is not read)."""
+    tab = page.get_by_role("tab", name="Results", exact=True)
+    _wait(lambda: tab.count() or "Per category" in _panel_text(page), timeout=30, what="the Results panel or tab")
+    if tab.count():
+        tab.click()
 
 
 def _pick(page, current: str, option: str) -> None:
@@ -131,3 +140,40 @@ def test_a_file_that_is_not_results_is_a_notice(dash, page):
     _pick(page, "frontier.jsonl", "notes.jsonl")
     page.get_by_text("notes.jsonl is not an eval result file: no episode line").first.wait_for(timeout=30_000)
     assert dash.view.results._file.path.name == "frontier.jsonl"  # the last good file stays shown
+
+
+def test_a_failure_opens_in_rerun_and_loads_into_the_live_session_at_a_chosen_step(dash, page):
+    """Issue 34, from the page alone: a failed row opens in rerun's web viewer (a link in the panel),
+    and, scrubbed to step K, loads into the live session there: the status shows that episode at K."""
+    import urllib.request
+
+    from test_dashboard_browser import _step_shown
+
+    panel, ctl = dash.view.results, dash.controller
+    if panel.filter.value != "failures":  # the dashboard is shared: an earlier test may have filtered
+        _pick(page, panel.filter.value, "failures")
+    target = next(r for r in panel._file.rows if not r.success)
+    _wait(lambda: page.locator(f"input[value='{target.label}']:visible").count() > 0, what="the failed episode")
+    page.get_by_role("button", name="Open in rerun", exact=True).last.click()
+    link = page.get_by_role("link", name=f"Open {recording_of(panel.source.recordings_dir, target).name} in rerun")
+    link.first.wait_for(timeout=60_000)
+    url = link.first.get_attribute("href")
+    with urllib.request.urlopen(url, timeout=30) as reply:
+        assert reply.status == 200
+    page.get_by_role("button", name="Open", exact=True).click()
+    page.get_by_text("opened ").first.wait_for(timeout=60_000)
+    k = min(5, target.steps - 1)
+    slider = page.get_by_role("slider").last
+    slider.focus()
+    for _ in range(k):
+        slider.press("ArrowRight")
+    _wait(lambda: panel.load_step.value == k, timeout=30, what=f"Load at step following the slider to {k}")
+    page.get_by_role("button", name="Load into session", exact=True).click()
+    _wait(lambda: _step_shown(page) == k and target.raw["key"] in _panel_text(page), timeout=120, what="step K")
+    snap = ctl.snapshot
+    assert snap.event.episode_key == target.raw["key"] and snap.event.step == k and not snap.running
+    assert snap.policy == target.policy and "diverges" not in _panel_text(page)
+    page.screenshot(path=str(page.shots / "dashboard_results_loaded.png"))
+    page.get_by_role("button", name="Take over by hand", exact=True).click()
+    _wait(lambda: ctl.snapshot.policy == "teleop" and not ctl.snapshot.busy, timeout=120, what="teleop takes over")
+    assert ctl.snapshot.event.step == k and ctl.snapshot.event.episode_key == target.raw["key"]

@@ -24,6 +24,7 @@ from l3mvn.core.errors import L3MVNError
 from l3mvn_studio.cli import serve_main
 from l3mvn_studio.origin import OriginPolicy
 from l3mvn_studio.server import start_dashboard
+from l3mvn_studio.tab_notices import SEPARATOR
 from l3mvn_studio.viser_hooks import start_checked_server
 
 SMALL = Config(sim=SimConfig().with_frame(120, 160))
@@ -132,7 +133,9 @@ class Tab:
         )["props"]
 
     def notices(self) -> list[str]:
-        return [m["props"]["body"] for m in self.received if m["type"] == "NotificationShowMessage"]
+        """Every text the tab was shown, once each (texts that come together share a card)."""
+        cards = [m["props"]["body"] for m in self.received if m["type"] == "NotificationShowMessage"]
+        return list(dict.fromkeys(text for card in cards for text in card.split(SEPARATOR)))
 
     def updates_of(self, uuid: str) -> list:
         return [m["updates"] for m in self.received if m["type"] == "GuiUpdateMessage" and m["uuid"] == uuid]

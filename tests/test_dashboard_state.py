@@ -272,3 +272,97 @@ def test_teleop_refuses_to_act_on_its_own():
     agent = TeleopAgent(GLOBAL_POLICIES["cost-utility"](), ("chair",), SMALL)
     with pytest.raises(L3MVNError, match="acts only when driven"):
         agent.act(None)
+
+
+def test_a_run_says_the_speed_it_achieves_beside_the_speed_asked(ctl):
+    ctl.reset(ctl.scene_keys[0], _nearest(ctl))
+    assert ctl.wait_idle()
+    ctl.set_speed(60)
+    ctl.run()
+    _until(lambda: ctl.snapshot.event.done)
+    assert ctl.wait_idle()
+    measured = [s for s in ctl.snaps if s.running and s.achieved_steps_per_second is not None]
+    assert measured, "a run of several steps measures its rate"
+    for s in measured:
+        assert 0 < s.achieved_steps_per_second <= 60 * 1.2  # a timer of 60 per second never runs much faster
+        assert "Speed: " in status_markdown(s)
+    assert ctl.snapshot.achieved_steps_per_second is None  # the run ended: nothing is running at any speed
+    assert "Speed: " not in status_markdown(ctl.snapshot)
+
+
+def test_the_achieved_rate_counts_only_an_uninterrupted_run():
+    from l3mvn_studio.page_markdown import speed_words
+    from l3mvn_studio.step_rate import StepRate
+
+    rate = StepRate(window=4)
+    assert rate.per_second is None
+    for t in (0.0, 0.2, 0.4, 0.6, 0.8, 1.0):  # only the last four intervals count
+        rate.add(t)
+    assert rate.per_second == pytest.approx(5.0)
+    rate.add(11.0)  # a slow step pulls the window's rate down
+    assert rate.per_second == pytest.approx(4 / 10.6)
+    rate.clear()
+    rate.add(20.0)
+    assert rate.per_second is None
+    assert speed_words(3.9, 4) == "Speed: 3.9 steps/s, as asked"
+    slow = speed_words(5.5, 20)
+    assert slow.startswith("Speed: **5.5 steps/s** of 20 asked") and "182 ms" in slow and "50 ms" in slow
+
+
+def _episode_start(policy: str = "frontier", *, houses: int = 2, recorded=None):
+    """An episode of another episode set than the dashboard's (two houses: the second one's first episode)."""
+    from l3mvn_studio.session_worker import EpisodeStart
+
+    cfg = SMALL
+    episodes = load_episode_set(None, "val", houses=houses, episodes_per_house=2, cfg=cfg)
+    episode = episodes.episodes[-1]
+    return EpisodeStart(episodes.name, episodes.scene_of(episode), episode, policy, cfg, recorded=recorded or {})
+
+
+def test_an_episode_loads_at_a_step_then_the_policy_goes_on_or_teleop_takes_over(fresh):
+    """Issue 34: an episode from outside the dashboard's set loads at step K (only its start and K are
+    drawn), paused;
+    Step continues the same trajectory a straight run takes; teleop then takes over where it stands, and
+    the episode counts as steered by hand."""
+    from l3mvn.run.runner import Runner
+
+    start = _episode_start()
+    straight = Runner(start.config).session(start.scene, "frontier")
+    straight.start(start.episode)
+    poses = [straight.last_event.pose] + [straight.step().pose for _ in range(7)]
+    events: list[StepEvent] = []
+    fresh.bus.subscribe(events.append)
+    snaps: list[Snapshot] = []
+    fresh.on_snapshot(snaps.append)
+    fresh.load(start, 6)
+    assert fresh.wait_idle(120)
+    snap = fresh.snapshot
+    assert snap.event.episode_key == start.episode.key and snap.event.step == 6 and not snap.running
+    assert snap.policy == "frontier" and fresh.session.episode.key not in {e.key for e in fresh.episodes.episodes}
+    # The steps between are not drawn; the start is, so the page takes it for a new episode.
+    assert {s.event.step for s in snaps if s.event is not None} == {0, 6}
+    assert [e.pose for e in events] == poses[:7]
+    assert "loaded" in fresh.notices[-1].text and "diverges" not in fresh.notices[-1].text
+    fresh.step()
+    assert fresh.wait_idle(60) and fresh.snapshot.event.pose == poses[7]
+    fresh.set_policy("teleop")  # a loaded episode: teleop takes it over where it stands
+    assert fresh.wait_idle(120)
+    assert fresh.snapshot.policy == "teleop" and fresh.snapshot.event.step == 7
+    assert fresh.snapshot.event.pose == poses[7] and "teleop took over" in fresh.notices[-1].text
+    fresh.drive("stop")
+    assert fresh.wait_idle(60) and fresh.snapshot.event.done
+    assert fresh.snapshot.metrics.steered == 1 and fresh.snapshot.metrics.episodes == 0
+
+
+def test_a_replay_that_leaves_its_recording_says_where(fresh):
+    from l3mvn.core.types import Pose
+
+    start = _episode_start(recorded={0: Pose(0.0, 0.0, 0.0)})
+    fresh.load(start, 2)
+    assert fresh.wait_idle(120)
+    text = fresh.notices[-1].text
+    assert fresh.notices[-1].level == "warning" and "the replay diverges from the recording at step 0" in text
+    with pytest.raises(L3MVNError, match="whole number from 0"):
+        fresh.load(start, -1)
+    with pytest.raises(L3MVNError, match="cannot be replayed"):
+        fresh.load(_episode_start("teleop"), 1)

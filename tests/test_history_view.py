@@ -85,3 +85,33 @@ def test_the_history_picture_draws_frontiers_goal_and_agent_over_the_map(dash):
     for f in view.frontiers:  # a disc at each frontier's cell
         y, x = ((np.array(f.cell) - view.origin + 0.5) * view.scale).astype(int)
         assert changed[y, x]
+
+
+def test_a_target_change_keeps_the_steps_before_it_and_every_step_keeps_its_camera_frames(dash):
+    ctl, panel = dash.controller, dash.view.history
+    _start(ctl, 0)
+    for _ in range(4):
+        ctl.step()
+        assert ctl.wait_idle(30)
+    _wait("4 steps kept", lambda: panel.steps == [1, 2, 3, 4])
+    first_goal = ctl.snapshot.event.goal
+    other = next(g for g in ctl.session.task.scene.present_goals() if g != first_goal)
+    ctl.change_target(other)
+    assert ctl.wait_idle(30)
+    for _ in range(3):
+        ctl.step()
+        assert ctl.wait_idle(30)
+    _wait("the new segment's steps added to the old ones", lambda: panel.steps == list(range(1, 8)))
+    panel.show(2)
+    assert panel.line.content.startswith("step 2: ")
+    panel.show(4)
+    assert f"then new target {other}" in panel.line.content  # the step that was retargeted says so
+    panel.show(6)
+    assert panel.line.content.startswith(f"step 6 (segment 1, target {other}): ")
+    map_only = history_picture(ctl.snapshot.map)  # the live map has the width a kept step's map has
+    shown = panel.picture_at(6)
+    assert shown.shape[0] > map_only.shape[0] + 20  # the camera strip lies below the map
+    strip = shown[-20:]  # the camera frames are pictures, not the dark margin
+    assert strip.std() > 5
+    _start(ctl, 0)  # a Reset of the same episode starts a new history
+    _wait("a fresh history", lambda: panel.steps == [] and panel.step.disabled)

@@ -79,3 +79,26 @@ def test_only_recordings_of_the_folder_can_be_opened(dash):
     with pytest.raises(L3MVNError, match=r"^no recording '\.\./x\.rrd' in .*; valid: .*\.rrd") as info:
         dash.view.recordings.open("../x.rrd")
     assert "\n" not in str(info.value)
+
+
+def test_the_folders_the_results_panel_reads_are_listed_and_open_too(dash, tmp_path):
+    """Issue 34: the eval's recordings (serve --recordings) are listed beside the live session's, each
+    under its folder, and open in rerun like them; a folder two roles share is listed once."""
+    import shutil
+
+    panel = dash.view.recordings
+    live = list(panel.pick.options)
+    shutil.copy(panel.record_dir / live[0], tmp_path / live[0])
+    before = list(panel._folders)
+    try:
+        panel.add_folder("eval recordings", tmp_path)
+        panel.add_folder("re-runs", panel.record_dir)
+        assert [label for label, _ in panel.folders()] == ["live session and re-runs", "eval recordings"]
+        assert tuple(panel.pick.options) == (*live, f"eval recordings: {live[0]}")
+        assert "**eval recordings**" in panel.listing.content and code(f"{tmp_path}/") in panel.listing.content
+        viewer = panel.open(f"eval recordings: {live[0]}")
+        assert viewer.alive and _answers(viewer.url) == 200 and viewer.url in panel.link.content
+    finally:
+        panel.close()
+        panel._folders[:] = before
+        panel.refresh()

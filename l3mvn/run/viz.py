@@ -16,6 +16,25 @@ BACKGROUND_RGB = (40, 40, 40)
 # Cells the agent's failed forward steps blocked (walls to its planner); violet, far from every category.
 COLLISION_RGB = (90, 0, 225)
 
+# The map's one colour scheme: the live map, the Compare and Results pictures, rerun recordings and
+# exported videos all draw with these, so a colour means the same thing wherever a map is shown.
+# Dark unexplored space makes the light explored floor the figure, and the category colours and
+# the frontier colormap read on both.
+UNEXPLORED_RGB = (28, 30, 36)
+FREE_RGB = (226, 226, 220)
+GLIMPSED_RGB = (170, 170, 160)  # explored only from afar: what the agent may go look at
+OBSTACLE_RGB = (112, 112, 124)
+GUESSED_RGB = (70, 72, 88)  # an obstacle only guessed from depth too near to read
+TRAJECTORY_RGB = (10, 10, 10)  # the walked path lies on explored floor: black reads best there
+AGENT_RGB = (230, 30, 40)
+GOAL_RGB = (255, 0, 200)  # the long-term goal
+SHORT_TERM_GOAL_RGB = (255, 150, 0)
+TARGET_RGB = (0, 0, 0)  # boxes and rings round the target category: no category colour is black
+UNSCORED_RGB = (150, 150, 150)  # a frontier without a finite score
+# Frontier score colormap, low -> high (viridis anchors): ordered in lightness, so it reads in grey too.
+SCORE_ANCHORS = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]], np.float32)
+SCORE_SCALE = "min-max"  # what the legends say the colours span
+
 # Hand-picked, mutually distinct colours for the categories people look at most.
 _NAMED_RGB: dict[str, tuple[int, int, int]] = {
     "chair": (230, 120, 40),
@@ -107,6 +126,41 @@ def category_palette(categories: tuple[str, ...]) -> np.ndarray:
 
 def legend(categories: tuple[str, ...]) -> list[tuple[str, tuple[int, int, int]]]:
     return [(c, category_color(c)) for c in categories]
+
+
+def fitted_scores(scores) -> np.ndarray:
+    """(N,) scores -> (N,) positions in [0, 1] on the colormap: min-max over the scores given.
+
+    Min-max rather than rank: fused scores crowd into a narrow band (a fixed 0..1 scale paints them
+    one colour), and min-max spreads that band over the whole colormap while keeping the gaps
+    between scores (two near-equal frontiers get near-equal colours; a rank would make a 0.001
+    difference look as large as any other). Frontiers that all score alike sit mid-scale; NaN stays NaN.
+    """
+    s = np.asarray(scores, np.float64).reshape(-1)
+    finite = np.isfinite(s)
+    if not finite.any():
+        return np.full(s.shape, np.nan)
+    lo, hi = float(s[finite].min()), float(s[finite].max())
+    if hi - lo < 1e-9:
+        return np.where(finite, 0.5, np.nan)
+    return (s - lo) / (hi - lo)
+
+
+def colormap(t) -> np.ndarray:
+    """(N,) positions in [0, 1] -> (N, 3) uint8 score colours; NaN is ``UNSCORED_RGB``."""
+    t = np.asarray(t, np.float64).reshape(-1)
+    nan = ~np.isfinite(t)
+    x = np.clip(np.where(nan, 0.0, t), 0.0, 1.0) * (len(SCORE_ANCHORS) - 1)
+    lo = np.minimum(x.astype(np.int64), len(SCORE_ANCHORS) - 2)
+    frac = (x - lo)[:, None]
+    rgb = np.round(SCORE_ANCHORS[lo] * (1.0 - frac) + SCORE_ANCHORS[lo + 1] * frac).astype(np.uint8)
+    rgb[nan] = UNSCORED_RGB
+    return rgb
+
+
+def score_colors(scores) -> np.ndarray:
+    """(N,) scores -> (N, 3) uint8 colours fitted to the scores present (``fitted_scores``)."""
+    return colormap(fitted_scores(scores))
 
 
 def colorize_semantic(semantic: np.ndarray, categories: tuple[str, ...]) -> np.ndarray:

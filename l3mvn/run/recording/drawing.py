@@ -3,9 +3,9 @@ result and compare views draw them.
 
 One frame per recorded step: the RGB frame beside the top-down map (cropped to what the episode
 mapped, the target category boxed, frontiers coloured by score, the best three and the chosen one
-labelled, a score colour bar), and under them the step, the target and the decision (and, for a
-language policy, the fusion rule's line behind the current choice). A title card with the outcome
-(success, or the failure cause, SPL, DTG) opens the video.
+labelled, a score colour bar fitted to the step's scores), and under them the step, the target and
+the decision (and, for a language policy, the fusion rule's line behind the current choice). A title
+card with the outcome (success, or the failure cause, SPL, DTG) opens the video.
 """
 
 from __future__ import annotations
@@ -18,9 +18,16 @@ import cv2
 import numpy as np
 
 from l3mvn.core.errors import L3MVNError
-from l3mvn.run.recording.layout import AGENT_RGB, GOAL_RGB, TARGET_RGB, score_colors
 from l3mvn.run.recording.recorded import RecordedEpisode, RecordedStep
-from l3mvn.run.viz import COLLISION_RGB
+from l3mvn.run.viz import (
+    AGENT_RGB,
+    COLLISION_RGB,
+    GOAL_RGB,
+    SCORE_SCALE,
+    TARGET_RGB,
+    TRAJECTORY_RGB,
+    colormap,
+)
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX  # pictures drawn from recordings (video and the dashboard's compare view)
 PANEL_BG = (24, 24, 24)
@@ -152,7 +159,7 @@ def _map_panel(ep: RecordedEpisode, s: RecordedStep, lut: np.ndarray, size: tupl
     if s.frontier_cells is not None and len(s.frontier_cells.xy):
         _paint_cells(img, px(s.frontier_cells.xy), half, s.frontier_cells.rgb)
     if s.trajectory is not None and len(s.trajectory) > 1:
-        cv2.polylines(img, [px(s.trajectory)], False, AGENT_RGB, max(1, int(k)), cv2.LINE_AA)
+        cv2.polylines(img, [px(s.trajectory)], False, TRAJECTORY_RGB, max(1, int(k)), cv2.LINE_AA)
     placed: list[tuple[int, int, int, int]] = []
     if s.frontiers is not None:
         centres = px(s.frontiers.xy)
@@ -162,8 +169,8 @@ def _map_panel(ep: RecordedEpisode, s: RecordedStep, lut: np.ndarray, size: tupl
             cv2.circle(img, (int(x), int(y)), radius, (0, 0, 0), 1, cv2.LINE_AA)
             placed.append((x - radius, y - radius, x + radius, y + radius))
         for (x, y), label, rgb in zip(centres, s.frontiers.labels, s.frontiers.rgb):
-            if label:
-                _place_label(img, label, (int(x), int(y)), placed, tuple(int(v) for v in rgb))
+            if label:  # OpenCV's fonts have no star: the chosen frontier's mark is drawn as "*"
+                _place_label(img, label.replace("★", "*"), (int(x), int(y)), placed, tuple(int(v) for v in rgb))
     if boxes:
         x0, y0, x1, _ = boxes[0]
         _place_label(img, f"target: {s.goal}", ((x0 + x1) // 2, y0), placed, (255, 255, 255))
@@ -235,16 +242,17 @@ def _label(img: np.ndarray, text: str, at: tuple[int, int], rgb, scale: float = 
 
 
 def _colour_bar(img: np.ndarray) -> None:
-    """Frontier score 0 (red) .. 1 (green), bottom left of the map."""
+    """The frontier score colormap, bottom left of the map: fitted to each step's frontiers (the
+    recorder colours them min-max), so its ends are that step's lowest and highest score."""
     h = img.shape[0]
     w = max(60, img.shape[1] // 5)
-    bar = score_colors(np.linspace(0, 1, w))
-    y0, x0 = h - 26, 34
-    cv2.rectangle(img, (4, y0 - 18), (x0 + w + 26, h - 4), (20, 20, 20), -1)
+    bar = colormap(np.linspace(0, 1, w))
+    y0, x0 = h - 26, 40
+    cv2.rectangle(img, (4, y0 - 18), (x0 + w + 40, h - 4), (20, 20, 20), -1)
     img[y0 : y0 + 10, x0 : x0 + w] = bar[None]
-    cv2.putText(img, "0", (x0 - 14, y0 + 10), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
-    cv2.putText(img, "1", (x0 + w + 6, y0 + 10), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
-    cv2.putText(img, "frontier score", (x0, y0 - 5), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
+    cv2.putText(img, "low", (x0 - 32, y0 + 10), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
+    cv2.putText(img, "high", (x0 + w + 4, y0 + 10), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
+    cv2.putText(img, f"frontier score ({SCORE_SCALE}, this step)", (x0, y0 - 5), FONT, 0.4, TEXT_RGB, 1, cv2.LINE_AA)
 
 
 def _band(frame: np.ndarray, geo: FrameGeometry, ep: RecordedEpisode, s: RecordedStep, last: int) -> None:

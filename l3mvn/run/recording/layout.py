@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 import rerun.blueprint as rrb
 
 from l3mvn.run.recording.entities import (
@@ -29,21 +28,9 @@ from l3mvn.run.recording.entities import (
     WORLD,
 )
 
-# The colours of a recording, shared by the recorder and the videos made from it.
-AGENT_RGB = (30, 120, 255)
-GOAL_RGB = (255, 0, 200)  # the long-term goal
-TARGET_RGB = (0, 0, 0)  # boxes around the target category: no category colour is black
-LOW_SCORE_RGB = np.array([220, 50, 50], np.float32)  # frontier score 0 .. 1: red .. green
-HIGH_SCORE_RGB = np.array([40, 190, 80], np.float32)
 LABELLED_FRONTIERS = 3  # only the best frontiers (and the chosen one) carry a label: more would overlap
 MIN_VIEW_M = 6.0  # a fitted map view is never narrower: the first steps map a thin cone
 VIEW_MARGIN = 0.1  # of the mapped extent, on every side
-
-
-def score_colors(scores: np.ndarray) -> np.ndarray:
-    """(N,) scores in [0, 1] -> (N, 3) uint8 colours, red (0) to green (1)."""
-    t = np.clip(np.asarray(scores, np.float32), 0.0, 1.0)[:, None]
-    return (LOW_SCORE_RGB * (1 - t) + HIGH_SCORE_RGB * t).astype(np.uint8)
 
 
 @dataclass(frozen=True)

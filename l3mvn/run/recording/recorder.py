@@ -55,17 +55,22 @@ from l3mvn.run.recording.entities import (
     WORLD_TRAJECTORY,
     language_by_goal,
 )
-from l3mvn.run.recording.layout import (
+from l3mvn.run.recording.layout import LABELLED_FRONTIERS, MapBounds, default_blueprint, map_view_bounds
+from l3mvn.run.viz import (
     AGENT_RGB,
+    BACKGROUND_RGB,
+    COLLISION_RGB,
+    FREE_RGB,
     GOAL_RGB,
-    LABELLED_FRONTIERS,
+    OBSTACLE_RGB,
+    SHORT_TERM_GOAL_RGB,
     TARGET_RGB,
-    MapBounds,
-    default_blueprint,
-    map_view_bounds,
+    TRAJECTORY_RGB,
+    UNEXPLORED_RGB,
+    category_color,
+    category_palette,
     score_colors,
 )
-from l3mvn.run.viz import BACKGROUND_RGB, COLLISION_RGB, category_color, category_palette
 from l3mvn.world.episode import Episode
 
 log = logging.getLogger(__name__)
@@ -76,12 +81,12 @@ _GOAL_ARM_CELLS = 5.0  # half the size of the goal's cross on the map
 _TARGET_MERGE_M = 0.5  # target fragments on the map closer than this share one box
 _TARGET_MERGE_PX = 3  # and in the camera frame
 
-# Map classes before the categories, SemExp's visualisation colours (unexplored is white).
+# Map classes before the categories, in the map's one colour scheme (l3mvn.run.viz).
 _MAP_CLASSES = (
-    ("unexplored", (255, 255, 255)),
-    ("explored", (235, 235, 235)),
-    ("obstacle", (150, 150, 150)),
-    ("visited", (245, 92, 66)),
+    ("unexplored", UNEXPLORED_RGB),
+    ("explored", FREE_RGB),
+    ("obstacle", OBSTACLE_RGB),
+    ("visited", TRAJECTORY_RGB),
 )
 
 
@@ -396,7 +401,7 @@ class Recorder:
         here = (c + 0.5, r + 0.5)
         if not self._map_xy or self._map_xy[-1] != here:
             self._map_xy.append(here)
-            rec.log(MAP_TRAJECTORY, rr.LineStrips2D([self._map_xy], colors=[AGENT_RGB], radii=[0.6]))
+            rec.log(MAP_TRAJECTORY, rr.LineStrips2D([self._map_xy], colors=[TRAJECTORY_RGB], radii=[0.6]))
         heading = (math.cos(m.agent_heading) * 8.0, math.sin(m.agent_heading) * 8.0)
         rec.log(
             MAP_AGENT,
@@ -406,7 +411,7 @@ class Recorder:
 
         self._log_goal(d)
         self._log_collision_marks(d.collision_marks)
-        self._log_point(MAP_SHORT_TERM_GOAL, d.short_term_goal, 2.0, (255, 160, 0), None)
+        self._log_point(MAP_SHORT_TERM_GOAL, d.short_term_goal, 2.0, SHORT_TERM_GOAL_RGB, None)
         self._log_frontiers(d.frontiers, d.chosen_frontier)
         if d.long_term_goal is not None:
             gx, gy = m.cell_to_world(*d.long_term_goal)
