@@ -92,7 +92,7 @@ class ComparePanel:
         choices = comparable_policies()
         first = current_policy if current_policy in choices else FALLBACK_A
         excluded = "; ".join(f"`{p}` ({why})" for p, why in excluded_policies().items())
-        with gui.add_folder("Compare", expand_by_default=False):
+        with gui.add_folder("Compare"):  # in a tab of its own: open, or the tab looks empty
             gui.add_markdown(
                 "Two policies on the episode selected in **Episode**, step by step, "
                 f"run as `l3mvn eval` runs them (same seed). Not offered: {excluded}."
