@@ -9,8 +9,8 @@ from __future__ import annotations
 import math
 from html import escape
 
-from l3mvn.run.eval.paired import Pairing
-from l3mvn_studio.report_data import Estimate, LengthCurves, Run
+from l3mvn.run.eval.paired import Estimate, Pairing
+from l3mvn_studio.report_data import LengthCurves, Run
 
 COLOURS = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#000000", "#F0E442")
 _FONT = 12

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from l3mvn.core.errors import L3MVNError
-from l3mvn.run.eval.paired import LEVEL, RESAMPLES, Pairing, compare_results, config_differences
+from l3mvn.run.eval.paired import Estimate, Pairing, bootstrap_mean, compare_results, config_differences
 from l3mvn.run.eval.results import episode_lines
 from l3mvn.world.task.scoring import FAILURE_CAUSES
 
@@ -25,16 +25,6 @@ MEASURES = ("success", "spl", "dtg")
 SEED = 0  # the bootstrap's: the same files give the same page
 LENGTH_BINS = 5
 MIN_PER_BIN = 20  # episodes of a run a length bin should hold: fewer, and its interval spans most of [0, 1]
-
-
-@dataclass(frozen=True)
-class Estimate:
-    """A mean over ``n`` episodes with its bootstrap interval (all nan when ``n`` is 0)."""
-
-    mean: float
-    low: float
-    high: float
-    n: int
 
 
 @dataclass(frozen=True)
@@ -157,20 +147,10 @@ def _estimates(rows: list[dict], rng: np.random.Generator) -> dict[str, Estimate
     """SR and SPL over every row (a missing SPL counts 0, as the eval summary counts it); DTG over the
     rows that have one (an episode without a path has none)."""
     return {
-        "success": estimate([float(r["success"]) for r in rows], rng),
-        "spl": estimate([float(r["spl"] or 0.0) for r in rows], rng),
-        "dtg": estimate([float(r["dtg"]) for r in rows if r["dtg"] is not None], rng),
+        "success": bootstrap_mean([float(r["success"]) for r in rows], rng),
+        "spl": bootstrap_mean([float(r["spl"] or 0.0) for r in rows], rng),
+        "dtg": bootstrap_mean([float(r["dtg"]) for r in rows if r["dtg"] is not None], rng),
     }
-
-
-def estimate(values: list[float], rng: np.random.Generator, resamples: int = RESAMPLES) -> Estimate:
-    """The mean of ``values`` and its percentile bootstrap interval (episodes resampled with replacement)."""
-    if not values:
-        return Estimate(math.nan, math.nan, math.nan, 0)
-    v = np.asarray(values, dtype=float)
-    boot = v[rng.integers(0, len(v), size=(resamples, len(v)))].mean(axis=1)
-    low, high = np.quantile(boot, [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
-    return Estimate(float(v.mean()), float(low), float(high), len(v))
 
 
 def _compare(first: tuple[Path, dict | None, list[Run]], other: tuple[Path, dict | None, list[Run]]) -> FileComparison:
@@ -227,8 +207,8 @@ def _length_curves(runs: list[Run], rng: np.random.Generator) -> LengthCurves:
             inside = [r for r in run.rows if (x := _length(r, key)) is not None and _bin(inner, x) == i]
             per_run.append(
                 (
-                    estimate([float(r["success"]) for r in inside], rng),
-                    estimate([float(r["spl"] or 0.0) for r in inside], rng),
+                    bootstrap_mean([float(r["success"]) for r in inside], rng),
+                    bootstrap_mean([float(r["spl"] or 0.0) for r in inside], rng),
                 )
             )
         bins.append(LengthBin(float(edges[i]), float(edges[i + 1]), tuple(per_run)))

@@ -14,9 +14,9 @@ import math
 from html import escape
 from importlib import resources
 
-from l3mvn.run.eval.paired import LEVEL, RESAMPLES
+from l3mvn.run.eval.paired import LEVEL, RESAMPLES, Estimate
 from l3mvn_studio.report_charts import causes_chart, difference_chart, legend, length_chart, run_colour
-from l3mvn_studio.report_data import SEED, Estimate, FileComparison, ReportData, Run
+from l3mvn_studio.report_data import SEED, FileComparison, ReportData, Run
 from l3mvn_studio.report_videos import VideoChoice
 
 # Settings under which SR and SPL mean something else: a difference in them is named as a trap.

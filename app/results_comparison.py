@@ -8,27 +8,15 @@ since a config difference, not the policy, may be what moved the numbers.
 
 from __future__ import annotations
 
-import json
-import tempfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from l3mvn.core.errors import L3MVNError
-from l3mvn.run.eval.paired import LEVEL, RESAMPLES, Pairing, compare_results, config_differences
+from l3mvn.run.eval.paired import RESAMPLES, Estimate, Pairing, bootstrap_mean, config_differences, pair_rows
 from l3mvn_studio.results import EpisodeRow, ResultFile
 
 MEASURES = (("SR", "success"), ("SPL", "spl"), ("DTG", "dtg"))
-
-
-@dataclass(frozen=True)
-class Estimate:
-    """A mean over episodes with its bootstrap interval (``LEVEL``)."""
-
-    mean: float
-    low: float
-    high: float
 
 
 @dataclass(frozen=True)
@@ -81,11 +69,11 @@ def compare_files(files: list[ResultFile], *, seed: int = 0, resamples: int = RE
         )
         for f, rows in zip(files, by_key, strict=True)
     )
-    with tempfile.TemporaryDirectory(prefix="l3mvn-compare-") as tmp:
-        paths = [_shared_lines(Path(tmp) / f"{i}.jsonl", rows, shared) for i, rows in enumerate(by_key)]
-        pairings = tuple(compare_results(paths[0], p, seed=seed, resamples=resamples) for p in paths[1:])
-    for pairing, f in zip(pairings, files[1:], strict=True):
-        pairing.a, pairing.b = files[0].path.name, f.path.name
+    lines = [{k: rows[k].raw for k in shared} for rows in by_key]  # only the episodes every file holds
+    pairings = tuple(
+        pair_rows(lines[0], other, files[0].path.name, f.path.name, seed=seed, resamples=resamples)
+        for f, other in zip(files[1:], lines[1:], strict=True)
+    )
     solved = tuple(
         (
             f.path.name,
@@ -108,16 +96,5 @@ def _value(row: EpisodeRow, field: str) -> float:
 
 
 def _estimate(values: list[float], rng: np.random.Generator, resamples: int) -> Estimate:
-    """The mean of the finite ``values`` and a percentile bootstrap interval over episodes."""
-    v = np.array([x for x in values if np.isfinite(x)])
-    if not len(v):
-        return Estimate(float("nan"), float("nan"), float("nan"))
-    boot = v[rng.integers(0, len(v), size=(resamples, len(v)))].mean(axis=1)
-    low, high = np.quantile(boot, [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
-    return Estimate(float(v.mean()), float(low), float(high))
-
-
-def _shared_lines(path: Path, rows: dict[str, EpisodeRow], keys: list[str]) -> Path:
-    """The lines of ``keys`` as a result file of their own: paired.py then pairs exactly the shared episodes."""
-    path.write_text("".join(json.dumps(rows[k].raw) + "\n" for k in keys))
-    return path
+    """The mean of the finite ``values`` (an episode without a DTG has none) with its interval."""
+    return bootstrap_mean([x for x in values if np.isfinite(x)], rng, resamples)

@@ -9,6 +9,7 @@ files are named first (a config difference, not the policy, may be what moved th
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,6 +20,26 @@ from l3mvn.run.eval.results import episode_lines
 
 RESAMPLES = 10_000
 LEVEL = 0.95
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A mean over ``n`` episodes with its bootstrap interval (all nan when ``n`` is 0)."""
+
+    mean: float
+    low: float
+    high: float
+    n: int
+
+
+def bootstrap_mean(values: list[float], rng: np.random.Generator, resamples: int = RESAMPLES) -> Estimate:
+    """The mean of ``values`` and its percentile bootstrap interval (episodes resampled with replacement)."""
+    if not values:
+        return Estimate(math.nan, math.nan, math.nan, 0)
+    v = np.asarray(values, dtype=float)
+    boot = v[rng.integers(0, len(v), size=(resamples, len(v)))].mean(axis=1)
+    low, high = np.quantile(boot, [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
+    return Estimate(float(v.mean()), float(low), float(high), len(v))
 
 
 @dataclass(frozen=True)
@@ -52,12 +73,19 @@ class Pairing:
 
 def compare_results(path_a: str | Path, path_b: str | Path, *, seed: int = 0, resamples: int = RESAMPLES) -> Pairing:
     """Pair the valid rows of two result files by episode key (see the module docstring)."""
-    a, b = _rows(path_a), _rows(path_b)
+    return pair_rows(_rows(path_a), _rows(path_b), str(path_a), str(path_b), seed=seed, resamples=resamples)
+
+
+def pair_rows(
+    a: dict[str, dict], b: dict[str, dict], name_a: str, name_b: str, *, seed: int = 0, resamples: int = RESAMPLES
+) -> Pairing:
+    """``compare_results`` on rows already read (episode key -> result row), e.g. the episodes that
+    several files share."""
     keys = sorted(set(a) & set(b))
     if not keys:
-        raise L3MVNError(f"{path_a} and {path_b} share no episode: compare two runs of the same episodes")
+        raise L3MVNError(f"{name_a} and {name_b} share no episode: compare two runs of the same episodes")
     pairing = Pairing(
-        str(path_a), str(path_b), (_policy(a), _policy(b)), only_a=len(set(a) - set(b)), only_b=len(set(b) - set(a))
+        name_a, name_b, (_policy(a), _policy(b)), only_a=len(set(a) - set(b)), only_b=len(set(b) - set(a))
     )
     pairing.config_differences = config_differences(a[keys[0]].get("config", {}), b[keys[0]].get("config", {}))
     rng = np.random.default_rng(seed)
@@ -121,16 +149,15 @@ def _difference(measure: str, a: list[dict], b: list[dict], rng: np.random.Gener
     va = np.array([float(r[measure] or 0.0) for r in a])
     vb = np.array([float(r[measure] or 0.0) for r in b])
     d = vb - va
-    boot = d[rng.integers(0, len(d), size=(resamples, len(d)))].mean(axis=1)
-    low, high = np.quantile(boot, [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
+    e = bootstrap_mean(list(d), rng, resamples)
     return Difference(
         measure,
         len(d),
         float(va.mean()),
         float(vb.mean()),
-        float(d.mean()),
-        float(low),
-        float(high),
+        e.mean,
+        e.low,
+        e.high,
         int((d > 0).sum()),
         int((d < 0).sum()),
     )
