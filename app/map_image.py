@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from l3mvn.agent.decision import Decision
-from l3mvn.agent.frontiers.types import POTENTIALS_RULE
+from l3mvn.agent.frontiers.types import prior_score_name
 from l3mvn.core.types import Pose
 from l3mvn.run.viz import (
     COLLISION_RGB,
@@ -202,7 +202,7 @@ def _marker(f, chosen: bool) -> FrontierMarker:
         chosen=chosen,
         llm_scores=dict(f.llm_scores),
         expected_m=dict(f.expected_m),
-        score_name="pot" if f.fusion is not None and f.fusion.rule == POTENTIALS_RULE else "LLM",
+        score_name=prior_score_name(f.fusion),
     )
 
 

@@ -215,6 +215,14 @@ def test_only_the_best_three_frontiers_and_the_chosen_one_are_labelled_and_score
     assert _rows(recorder.path, METRICS_CHOSEN_FRONTIER, "SeriesLines:names")[-1] == ["LLM", "CU", "fused"]
 
 
+def test_poni_potentials_are_named_as_potentials_not_as_a_language_models_scores(tiny_scene, tmp_path):
+    runner = Runner(CONFIG.replace(agent=AgentConfig(look_around_steps=2)))
+    recorder, _, _ = _record(runner, tiny_scene, "poni", tmp_path)
+    assert _rows(recorder.path, METRICS_CHOSEN_FRONTIER, "SeriesLines:names")[-1] == ["pot", "CU", "fused"]
+    labels = [label for row in _rows(recorder.path, MAP_FRONTIERS, POINTS_LABELS) for label in row if label]
+    assert labels and not any(" LLM " in label for label in labels)
+
+
 def test_the_target_is_boxed_on_the_map_and_the_view_is_fitted_to_the_mapped_area(tiny_scene, tmp_path):
     runner = Runner(
         CONFIG.replace(sim=dataclasses.replace(CONFIG.sim, max_steps=60), agent=AgentConfig(look_around_steps=2))

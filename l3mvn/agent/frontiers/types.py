@@ -17,6 +17,12 @@ import numpy as np
 POTENTIALS_RULE = "potentials"  # PONI's rule (l3mvn.agent.potentials.policy)
 
 
+def prior_score_name(fusion: Fusion | None) -> str:
+    """What a frontier's prior score (``s_llm``) is, in one word for labels and plots: PONI's potential
+    ("pot") or a language model's score ("LLM")."""
+    return "pot" if fusion is not None and fusion.rule == POTENTIALS_RULE else "LLM"
+
+
 @dataclass(frozen=True)
 class Fusion:
     """How a language policy turned its frontier scores into a choice, with every number it compared.

@@ -14,7 +14,7 @@ Entity tree (all on the ``step`` sequence timeline)::
     world/goal
     metrics/ground_truth  metrics/timings_ms           one named line per value (SeriesLines)
     metrics/frontiers  metrics/frontier_scores         the count; each frontier's score, a line per F<id>
-    metrics/chosen_frontier                            the chosen frontier's LLM, CU and fused scores
+    metrics/chosen_frontier                            the chosen frontier's prior (LLM, or PONI's pot), CU, fused
     metrics/language/chosen[_metres]                   language policies: the chosen frontier's p(goal)
     metrics/language/by_goal/<goal>                    (and metres) per goal; every frontier's p(goal)
     log/decisions  log/episode                         text logs: each decision; the start, target changes, result

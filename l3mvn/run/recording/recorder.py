@@ -17,6 +17,7 @@ import rerun as rr
 from scipy import ndimage as ndi
 
 from l3mvn.agent.decision import Decision
+from l3mvn.agent.frontiers.types import prior_score_name
 from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.run.events import EventBus, StepEvent
 from l3mvn.run.recording.catalogue import APPLICATION_ID, TIMELINE, recording_gap, recording_path
@@ -339,10 +340,15 @@ class Recorder:
 
     def _log_frontier_scores(self, d) -> None:
         """Each frontier's score (the one its colour shows) as a line named like its map label, F<id>,
-        and the chosen frontier's LLM, CU and fused scores: how the decision margin evolves."""
+        and the chosen frontier's prior (LLM, or PONI's "pot"), CU and fused scores: how the decision
+        margin evolves."""
         self._log_series(METRICS_FRONTIER_SCORES, {f"F{f.id}": _score(f) for f in d.frontiers})
         chosen = next((f for f in d.frontiers if f.id == d.chosen_frontier), None)
-        parts = {} if chosen is None else {"LLM": chosen.s_llm, "CU": chosen.s_cu, "fused": chosen.fused}
+        parts = (
+            {}
+            if chosen is None
+            else {prior_score_name(chosen.fusion): chosen.s_llm, "CU": chosen.s_cu, "fused": chosen.fused}
+        )
         self._log_series(METRICS_CHOSEN_FRONTIER, {k: math.nan if v is None else v for k, v in parts.items()})
         if any(f.llm_scores for f in d.frontiers):
             self._log_language(d.frontiers, chosen)
@@ -709,8 +715,9 @@ def _scores(frontiers: list, field: str) -> np.ndarray:
 
 
 def _scored(f) -> tuple[str, float]:
-    """The score a frontier is drawn by and its name: fused, else LLM, else CU (0 when none is finite)."""
-    for kind, value in (("fused", f.fused), ("LLM", f.s_llm), ("CU", f.s_cu)):
+    """The score a frontier is drawn by and its name: fused, else the prior (LLM or pot), else CU (0 when
+    none is finite)."""
+    for kind, value in (("fused", f.fused), (prior_score_name(f.fusion), f.s_llm), ("CU", f.s_cu)):
         if value is not None and math.isfinite(value):
             return kind, float(value)
     return "CU", 0.0
