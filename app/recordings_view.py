@@ -59,6 +59,7 @@ class RecordingsPanel:
         self._record_dir, self.host, self._tell = record_dir, host, tell
         self._folders: list[tuple[str, Path]] = []
         self._viewer: WebViewer | None = None
+        self._links: list = []  # the markdown handles that link the running viewer
         self._lock = threading.Lock()
         with gui.add_folder("Recordings"):
             self.listing = gui.add_markdown("")
@@ -138,17 +139,21 @@ class RecordingsPanel:
             raise L3MVNError(f"no recording {name!r} in {', '.join(str(f) for _, f in self.folders())}; valid: {valid}")
         return self.open_path(offered[name].path, client_id)
 
-    def open_path(self, path: Path, client_id: int | None = None) -> WebViewer:
-        """Serve ``path`` in rerun's web viewer (stopping the one before) and link it here; the caller
-        chose the file among those it offers."""
+    def open_path(self, path: Path, client_id: int | None = None, also=None) -> WebViewer:
+        """Serve ``path`` in rerun's web viewer (stopping the one before) and link it here, and in
+        ``also`` (another panel's markdown) when given; the caller chose the file among those it offers.
+        Every link to the viewer before goes first: it would lead to a stopped viewer."""
         with self._lock:
+            for handle in self._links:
+                handle.content = ""
             if self._viewer is not None:
                 self._viewer.stop()
             self._viewer = viewer = start_web_viewer(path, self.host)
-        self.link.content = (
-            f"**[Open {code(path.name)} in rerun]({viewer.url})** (rerun's web viewer, a new tab; "
-            "opening another recording stops this one)"
-        )
+            self._links = [self.link] if also is None else [self.link, also]
+        link = f"**[Open {code(path.name)} in rerun]({viewer.url})**"
+        self.link.content = f"{link} (rerun's web viewer, a new tab; opening another recording stops this one)"
+        if also is not None:
+            also.content = f"{link} (a new tab)"
         self._tell(client_id, f"rerun serves {path.name}: follow the link in the Recordings tab")
         log.info("rerun web viewer for %s at %s", path, viewer.url)
         return viewer

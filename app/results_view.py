@@ -316,9 +316,7 @@ class ResultsPanel:
                 f"no recording of {row.raw.get('key')} ({row.policy}) in {self.source.recordings_dir} or "
                 f"{self.source.rerun_dir}: press Re-run live to run and record it"
             )
-        viewer = self._viewer.open_path(path, client_id)
-        self.rerun_link.content = f"**[Open {code(path.name)} in rerun]({viewer.url})** (a new tab)"
-        return viewer.url
+        return self._viewer.open_path(path, client_id, also=self.rerun_link).url
 
     def load_into_session(self, row: EpisodeRow, step: int, client_id: int | None) -> None:
         """Load ``row``'s episode into the live session at ``step``, run with the line's stored config and

@@ -154,10 +154,15 @@ def test_a_failure_opens_in_rerun_and_loads_into_the_live_session_at_a_chosen_st
         _pick(page, panel.filter.value, "failures")
     target = next(r for r in panel._file.rows if not r.success)
     _wait(lambda: page.locator(f"input[value='{target.label}']:visible").count() > 0, what="the failed episode")
-    page.get_by_role("button", name="Open in rerun", exact=True).last.click()
     link = page.get_by_role("link", name=f"Open {recording_of(panel.source.recordings_dir, target).name} in rerun")
-    link.first.wait_for(timeout=60_000)
-    url = link.first.get_attribute("href")
+    before = {link.nth(i).get_attribute("href") for i in range(link.count())}  # an earlier test's viewer, if any
+    page.get_by_role("button", name="Open in rerun", exact=True).last.click()
+    _wait(
+        lambda: any(link.nth(i).get_attribute("href") not in before for i in range(link.count())),
+        timeout=60,
+        what="the link to the new viewer",
+    )
+    url = next(u for u in (link.nth(i).get_attribute("href") for i in range(link.count())) if u not in before)
     with urllib.request.urlopen(url, timeout=30) as reply:
         assert reply.status == 200
     page.get_by_role("button", name="Open", exact=True).click()
