@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import time
 import urllib.request
 
 import pytest
@@ -49,17 +48,10 @@ def dash(tmp_path_factory):
     yield from serve_dashboard(episodes_per_house=2, policy="frontier", record_dir=rec)
 
 
-def _answers(url: str, timeout: float = 30.0) -> int:
-    """The viewer's HTTP status once it listens (it starts in a second or two)."""
-    end = time.monotonic() + timeout
-    while True:
-        try:
-            with urllib.request.urlopen(url, timeout=5) as reply:
-                return reply.status
-        except OSError:
-            if time.monotonic() > end:
-                raise
-            time.sleep(0.3)
+def _answers(url: str) -> int:
+    """The viewer's HTTP status, asked once: a link is handed out only once the viewer answers."""
+    with urllib.request.urlopen(url, timeout=30) as reply:
+        return reply.status
 
 
 def test_open_in_rerun_serves_the_recording_and_links_it(dash):
@@ -73,6 +65,15 @@ def test_open_in_rerun_serves_the_recording_and_links_it(dash):
     assert not first.alive and second.alive and _answers(second.url) == 200
     dash.view.recordings.close()
     assert not second.alive
+
+
+def test_a_viewer_that_exits_before_serving_is_a_one_line_error(tmp_path, monkeypatch):
+    from l3mvn.run.recording import replay
+
+    monkeypatch.setattr(replay, "viewer_executable", lambda: "/bin/false")
+    monkeypatch.setattr(replay, "_check_recording", lambda path: None)
+    with pytest.raises(L3MVNError, match=r"^rerun's web viewer exited \(status 1\) before serving x\.rrd$"):
+        replay.start_web_viewer(tmp_path / "x.rrd")
 
 
 def test_only_recordings_of_the_folder_can_be_opened(dash):

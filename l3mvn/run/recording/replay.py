@@ -14,6 +14,7 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from contextlib import suppress
 from dataclasses import dataclass
@@ -25,6 +26,9 @@ from l3mvn.run.serving import check_listen_address, interrupt_on_stop_signals
 
 DEFAULT_WEB_PORT = 9090
 STOP_GRACE_S = 5.0  # rerun exits at once on SIGTERM; one that has not by then is killed
+# A web viewer's link is handed out only once its HTTP port answers (a link followed at once would
+# otherwise meet a refused connection); it starts in well under a second, this long on a loaded machine.
+READY_TIMEOUT_S = 30.0
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 
@@ -82,7 +86,8 @@ class WebViewer:
 
 def start_web_viewer(path: str | Path, host: str = "127.0.0.1") -> WebViewer:
     """Serve ``path`` in rerun's web viewer on free ports of ``host`` (for the dashboard's "Open in
-    rerun": no terminal needed); one-line L3MVNError for a file the viewer cannot show."""
+    rerun": no terminal needed), returned once its page answers; one-line L3MVNError for a file the
+    viewer cannot show, or a viewer that exits or does not answer within READY_TIMEOUT_S."""
     path = Path(path)
     _check_recording(path)
     exe = viewer_executable()
@@ -90,7 +95,28 @@ def start_web_viewer(path: str | Path, host: str = "127.0.0.1") -> WebViewer:
     cmd = _web_command(exe, path, host, port)
     url = web_viewer_url(port, int(cmd[cmd.index("--port") + 1]), _url_host(host))
     proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, **_child_options())
-    return WebViewer(path, url, proc)
+    viewer = WebViewer(path, url, proc)
+    _wait_answering(viewer, host, port)
+    return viewer
+
+
+def _wait_answering(viewer: WebViewer, host: str, port: int, timeout_s: float = READY_TIMEOUT_S) -> None:
+    """Return once ``host:port`` accepts a connection; stop the viewer and raise if it exits or times out."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        if not viewer.alive:
+            status = viewer.proc.returncode
+            raise L3MVNError(f"rerun's web viewer exited (status {status}) before serving {viewer.path.name}")
+        try:
+            with socket.create_connection((host, port), timeout=1.0):
+                return
+        except OSError:
+            if time.monotonic() > deadline:
+                viewer.stop()
+                raise L3MVNError(
+                    f"rerun's web viewer did not answer on {host}:{port} within {timeout_s:g} s; it was stopped"
+                ) from None
+            time.sleep(0.05)
 
 
 def _check_recording(path: Path) -> None:
