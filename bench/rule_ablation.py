@@ -93,9 +93,8 @@ class Row:
     steps: float
 
 
-def run_eval(args: argparse.Namespace, rule: str, settings: tuple[str, ...]) -> Path:
-    """``l3mvn eval --resume`` of one configuration into its own file; its path."""
-    out = Path(args.out) / f"{args.policy}_{rule}.jsonl"
+def run_eval(args: argparse.Namespace, rule: str, settings: tuple[str, ...], out: Path) -> None:
+    """``l3mvn eval --resume`` of one configuration into its own file ``out``."""
     cmd = [sys.executable, "-m", "l3mvn.run.cli", "eval", "--dataset", args.dataset, "--split", args.split]
     cmd += ["--policy", args.policy, "--frame", args.frame, "--workers", str(args.workers), "--seed", str(args.seed)]
     cmd += ["--out", str(out), "--resume"]
@@ -105,7 +104,6 @@ def run_eval(args: argparse.Namespace, rule: str, settings: tuple[str, ...]) -> 
     done = subprocess.run(cmd, stdout=subprocess.DEVNULL, check=False)
     if done.returncode != 0:
         raise SystemExit(f"error: the eval of {rule} exited with status {done.returncode}")
-    return out
 
 
 def rows_of(path: Path) -> dict[str, dict]:
@@ -153,10 +151,10 @@ def format_table(rows: list[Row], base: dict[str, dict], held_out: set[str]) -> 
     n_decide = sum(1 for r in base.values() if r["scene"] not in held_out)
     n_held = len(base) - n_decide
 
-    def sr_spl(keys: list[dict]) -> str:
-        if not keys:
+    def sr_spl(rows: list[dict]) -> str:
+        if not rows:
             return "-"
-        return f"{sum(r['success'] for r in keys) / len(keys):.3f} / {sum(r['spl'] or 0 for r in keys) / len(keys):.3f}"
+        return f"{sum(r['success'] for r in rows) / len(rows):.3f} / {sum(r['spl'] or 0 for r in rows) / len(rows):.3f}"
 
     lines = [
         f"default: decide houses ({n_decide} eps) SR / SPL "
@@ -194,15 +192,18 @@ def main() -> int:
     if args.rules:
         names = [n.strip() for n in args.rules.split(",") if n.strip()]
         unknown = [n for n in names if n not in known]
-        if unknown:
-            raise SystemExit(f"error: unknown rule(s) {', '.join(unknown)}; choose from {', '.join(known)}")
+        if unknown or not names:
+            what = f"unknown rule(s) {', '.join(unknown)}" if unknown else "--rules names no rule"
+            raise SystemExit(f"error: {what}; choose from {', '.join(known)}")
         chosen = [known[n] for n in names]
-    Path(args.out).mkdir(parents=True, exist_ok=True)
+    if not args.table_only:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
 
     paths = {}
     for name, settings in [(BASE, ())] + [(r.name, r.off) for r in chosen]:
-        path = Path(args.out) / f"{args.policy}_{name}.jsonl"
-        paths[name] = path if args.table_only else run_eval(args, name, settings)
+        paths[name] = Path(args.out) / f"{args.policy}_{name}.jsonl"
+        if not args.table_only:
+            run_eval(args, name, settings, paths[name])
     try:
         base = rows_of(paths[BASE])
         held_out = (
