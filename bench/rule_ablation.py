@@ -65,6 +65,11 @@ RULES = (
     ),
     Rule("far_areas", "visit areas seen only from afar before wandering", ("agent.look_min_area_m2=1e9",)),
     Rule("patience", "give up a goal not come closer to in 40 steps", ("agent.goal_patience_steps=100000",)),
+    Rule(
+        "done_frontier_only",
+        "a done frontier goal blocks only what is left of that frontier, not other openings within 1 m",
+        ("agent.blocked_frontier_gap_m=1000",),
+    ),
     Rule("commitment", "keep the current frontier unless another scores 0.15 more", ("agent.commitment_margin=0",)),
     Rule("blocked_stop", "stop at 0.95 m when no path leads closer", ("agent.blocked_stop_distance_m=0.9",)),
     Rule(

@@ -154,9 +154,10 @@ def test_reached_frontiers_are_not_chosen_again(env):
     agent.reset(episode)
     agent.change_target("couch")  # no couch in this house: the agent explores all the way
     radius = agent.cfg.blocked_radius_m / 0.05
+    gap = agent.cfg.blocked_frontier_gap_m / 0.05
     chosen = 0
     for _ in range(200):
-        blocked = list(agent.explore.blocked)
+        blocked, own = list(agent.explore.blocked), dict(agent.explore.done_frontiers)
         d = agent.act(obs)
         obs = env.step(d.action)
         fresh = d.timings_ms.get("frontiers", 0.0) > 0.0
@@ -166,7 +167,12 @@ def test_reached_frontiers_are_not_chosen_again(env):
         # A frontier stood on and looked beyond blocks only half the radius: the explorer's own radii
         # (new done goals are appended after the ones this choice saw).
         radii = agent.explore.blocked_radii(0.05)[: len(blocked)]
-        assert (radii >= radius / 2).all() and (gaps > radii).all()
+        assert (radii >= radius / 2).all()
+        cells = d.frontiers[d.chosen_frontier].cells
+        for cell in np.array(blocked)[gaps <= radii]:
+            # Within a done goal's radius only a frontier other than the done one may be taken.
+            done = own[tuple(int(v) for v in cell)]
+            assert np.hypot(*(cells[:, None, :] - done[None, :, :]).transpose(2, 0, 1)).min() > gap
         chosen += 1
     assert chosen > 0
 

@@ -173,6 +173,49 @@ def test_blocked_frontiers_are_dropped_before_the_far_limit_so_far_ones_return()
         extract_frontiers(explored, obstacle, agent, distance, maps, (), blocked=np.array([1, 2, 3]), resolution_m=RES)
 
 
+def test_a_done_frontier_blocks_what_is_left_of_itself_not_another_opening_beside_it():
+    # Two doors 0.75 m apart in one wall: the agent went to the left one and is done with it. The
+    # right one lies within the done goal's 1 m radius, but it borders other unknown space.
+    explored, obstacle, agent = five_door_hall({30: 9, 45: 9})
+    maps = np.zeros((0, *explored.shape), dtype=bool)
+    distance = straight_line(explored.shape, agent)
+    left = next(f for f in extract(explored, obstacle, agent) if f.center[1] == 30)
+
+    def centres(own, door_width=9):
+        hall, walls, _ = five_door_hall({30: door_width, 45: 9})
+        frontiers = extract_frontiers(
+            hall,
+            walls,
+            agent,
+            distance,
+            maps,
+            (),
+            blocked=np.array([left.center]),
+            blocked_radius_cells=20,
+            blocked_frontiers=[own],
+            blocked_gap_cells=5,
+            resolution_m=RES,
+        )
+        return sorted(f.center[1] for f in frontiers)
+
+    assert centres(None) == []  # a done goal that was no frontier: the whole radius, as before
+    assert centres(left.cells) == [45]  # the door beside it stays
+    assert centres(left.cells, door_width=7) == [45]  # what is left of the done door is still done
+    with pytest.raises(L3MVNError, match="one entry per blocked cell"):
+        extract_frontiers(
+            explored,
+            obstacle,
+            agent,
+            distance,
+            maps,
+            (),
+            blocked=np.array([left.center]),
+            blocked_radius_cells=20,
+            blocked_frontiers=[None, None],
+            resolution_m=RES,
+        )
+
+
 def test_each_blocked_cell_can_have_its_own_radius():
     explored, obstacle, agent = two_door_room()
     maps = np.zeros((0, *explored.shape), dtype=bool)

@@ -30,6 +30,7 @@ explored area, not the map size.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import cast
 
 import cv2
@@ -56,6 +57,8 @@ def extract_frontiers(
     resolution_m: float,
     blocked: np.ndarray | None = None,
     blocked_radius_cells: float | np.ndarray = 0.0,
+    blocked_frontiers: Sequence[np.ndarray | None] | None = None,
+    blocked_gap_cells: float = 0.0,
     agent_heading: float | None = None,
 ) -> list[Frontier]:
     """Frontiers of an (H, W) map, best S_CU first, ids 0..n-1 in that order.
@@ -66,6 +69,9 @@ def extract_frontiers(
     blocked: (N, 2) cells the caller is done with (reached or unreachable goals); a cluster whose
     candidate lies within ``blocked_radius_cells`` of one (a radius, or one per blocked cell) is
     dropped before the far limit, so frontiers beyond it stay eligible once the near ones are used up.
+    blocked_frontiers: per blocked cell, the (M, 2) cells of the frontier it was (None: not a frontier);
+    such a cell drops only the clusters within its radius that come within ``blocked_gap_cells`` of
+    those cells: the same frontier, as much of it as is left, and not other unknown space beside it.
     agent_heading (radians): with ``cfg.turn_cost_m_per_rad`` > 0, a frontier's cost C is its
     geodesic distance plus the turning needed to face it, so a frontier straight ahead beats an
     equally near one behind (turns spend the step budget as forward moves do).
@@ -106,7 +112,10 @@ def extract_frontiers(
             raise L3MVNError(
                 f"blocked_radius_cells: one radius per blocked cell, got {radius.shape[0]} for {len(blocked)}"
             )
-        distances = np.where((gap <= radius).any(axis=1), np.inf, distances)
+        near = gap <= radius
+        if blocked_frontiers is not None:
+            _same_frontier_only(near, cells, bounds, blocked_frontiers, blocked_gap_cells)
+        distances = np.where(near.any(axis=1), np.inf, distances)
     keep = _distance_filter(distances, cfg)
     if keep.size == 0:
         return []
@@ -131,6 +140,29 @@ def extract_frontiers(
         )
         for rank, i in enumerate(order)
     ]
+
+
+def _same_frontier_only(
+    near: np.ndarray,
+    cells: np.ndarray,
+    bounds: np.ndarray,
+    blocked_frontiers: Sequence[np.ndarray | None],
+    gap_cells: float,
+) -> None:
+    """Clear ``near[i, j]`` (cluster i lies within blocked cell j's radius) where j was a frontier
+    and no cell of cluster i comes within ``gap_cells`` of that frontier's cells."""
+    if len(blocked_frontiers) != near.shape[1]:
+        raise L3MVNError(
+            f"blocked_frontiers: one entry per blocked cell, got {len(blocked_frontiers)} for {near.shape[1]}"
+        )
+    for j, own in enumerate(blocked_frontiers):
+        if own is None or len(own) == 0 or not near[:, j].any():
+            continue
+        own = np.asarray(own, dtype=np.float64).reshape(-1, 2)
+        for i in np.flatnonzero(near[:, j]):
+            mine = cells[bounds[i] : bounds[i + 1]].astype(np.float64)
+            d2 = ((mine[:, None, :] - own[None, :, :]) ** 2).sum(axis=2)
+            near[i, j] = float(d2.min()) <= gap_cells * gap_cells
 
 
 def _validate(

@@ -4,7 +4,7 @@ The global policy only ranks; this module owns what the ranking is applied to an
 choice lasts: frontiers extracted away from goals already done, re-selection every
 ``replan_every`` steps with commitment to the goal pursued so far, look goals at floor only seen
 from afar once frontiers run out, and the record of done goals (those the agent stood on and
-looked beyond block a smaller radius).
+looked beyond block a smaller radius, and a done frontier blocks only what is left of itself).
 """
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ class ExplorationGoals:
         self.chosen_reason = ""  # why the frontier being kept was first chosen
         self.frontiers: list[Frontier] = []
         self.blocked: list[Cell] = []  # done goals: no frontier is taken near them again
+        self.done_frontiers: dict[Cell, np.ndarray] = {}  # done frontier goals: the frontier's cells
         self.stood: set[Cell] = set()  # done goals the agent stood on and looked beyond
         self.pressing: Cell | None = None  # frontier goal walked up to (``frontier_press_m``)
         self.since_select = math.inf
@@ -59,6 +60,8 @@ class ExplorationGoals:
         """The current goal is done (reached, unreachable or stalled): never come back to it."""
         assert self.cell is not None  # only a goal being pursued is done
         self.blocked.append(self.cell)
+        if self.kind == GoalKind.FRONTIER and self.frontier is not None:
+            self.done_frontiers[self.cell] = self.frontiers[self.frontier].cells
         if self.cell == self.pressing and reached:
             self.stood.add(self.cell)
 
@@ -102,6 +105,7 @@ class ExplorationGoals:
             # Every frontier left was reached once and is still there (the camera could not clear
             # it from where the agent stood): visiting them again beats wandering at random.
             self.blocked.clear()
+            self.done_frontiers.clear()
             self.frontiers = self.extract(sem_map)
         t1 = time.perf_counter()
         self._select(sem_map, goal, rng)
@@ -142,6 +146,8 @@ class ExplorationGoals:
             resolution_m=sem_map.resolution_m,
             blocked=np.array(self.blocked, dtype=np.int64).reshape(-1, 2),
             blocked_radius_cells=self.blocked_radii(sem_map.resolution_m),
+            blocked_frontiers=[self.done_frontiers.get(cell) for cell in self.blocked],
+            blocked_gap_cells=self.cfg.blocked_frontier_gap_m / sem_map.resolution_m,
             agent_heading=sem_map.agent_heading,
         )
 

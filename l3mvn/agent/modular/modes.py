@@ -328,7 +328,7 @@ class ExploreMode(GoalMode):
 
     def before_escape(self, step: Step, p: Pursuit) -> None:
         assert self.explore.cell is not None  # the goal this step escapes from
-        self.explore.blocked.append(self.explore.cell)
+        self.explore.done(reached=False)
 
     def _current(self, step: Step, last_move: float | None) -> Pursuit:
         explore = self.explore

@@ -37,8 +37,12 @@ class AgentConfig:
     # disk, not the object's 0.5 m one: that one reaches through walls, so a frontier in the next
     # room would read as "reached" from this side and the agent would push into the wall.
     explore_goal_dilation_m: float = 0.1
-    # A reached or unreachable exploration goal blocks frontiers whose centre lies this close to it.
+    # A reached or unreachable exploration goal blocks frontiers whose centre lies this close to it ...
     blocked_radius_m: float = 1.0
+    # ... and, where the goal was a frontier, only those that come this close to that frontier's own
+    # cells: the rest of what the radius covers borders other unknown space (an opening beside the
+    # spot, a hallway the goal never faced), and blocking it would shut that space for good.
+    blocked_frontier_gap_m: float = 0.25
     max_reselect: int = 3  # exploration goals tried within one step before walking on
     # An exploration goal the agent has not come goal_progress_m closer to in this many steps is given up like
     # an unreachable one: a path through unknown space that keeps meeting new walls stays "reachable"
@@ -95,8 +99,15 @@ class AgentConfig:
             raise L3MVNError(
                 f"{', '.join(nonpositive)} must be positive, got {', '.join(map(str, nonpositive.values()))}"
             )
-        if self.look_min_area_m2 < 0 or self.commitment_margin < 0 or self.explore_goal_dilation_m < 0:
-            raise L3MVNError("look_min_area_m2, commitment_margin and explore_goal_dilation_m must be >= 0")
+        if (
+            self.look_min_area_m2 < 0
+            or self.commitment_margin < 0
+            or self.explore_goal_dilation_m < 0
+            or self.blocked_frontier_gap_m < 0
+        ):
+            raise L3MVNError(
+                "look_min_area_m2, commitment_margin, explore_goal_dilation_m and blocked_frontier_gap_m must be >= 0"
+            )
         if not 0 < self.frontier_press_m < self.frontier_reached_m:
             raise L3MVNError("frontier_press_m must satisfy 0 < frontier_press_m < frontier_reached_m")
         if not 0 < self.glimpse_min_fraction < self.glimpse_max_fraction <= 1:
