@@ -119,7 +119,7 @@ def test_a_candidate_the_agent_comes_no_nearer_to_is_looked_at_from_elsewhere_th
     short) must not hold it for hundreds of steps. Here no step can bring the agent the (impossible)
     required progress closer: after its patience it tries another side, then sets the cells aside,
     instead of approaching for ever."""
-    agent = _agent(env, look_around_steps=0, goal_patience_steps=3, goal_progress_m=50.0)
+    agent = _agent(env, look_around_steps=0, goal_patience_steps=3, goal_progress_m=50.0, goal_progress_area_m2=1e9)
     decisions, _ = _until_set_aside(env, agent, 60, 60)  # 3 m east, in the unknown
     assert any("no nearer in 3 steps" in d.reason for d in decisions)
     assert len(decisions) < 30
@@ -216,16 +216,30 @@ def test_random_sample_keeps_its_goal_until_reached_while_frontier_policies_rese
 def test_an_exploration_goal_that_gets_no_nearer_is_given_up_after_the_patience(env):
     agent = _agent(env, goal_patience_steps=5)
     agent.reset(_episode())
-    goal = (10, 10)
-    # Circling: the path keeps changing and the distance wanders without a 0.5 m gain.
+    progress = agent.wayfinder.progress
+    goal, mapped = (10, 10), 1000
+    # Circling: the path keeps changing and the distance wanders without a 0.5 m gain, and the map
+    # grows by less than goal_progress_area_m2 (2 m2 = 800 cells) all the while.
     wander = [8.0, 8.3, 7.8, 8.1, 7.9]
-    assert not any(agent.wayfinder.progress.stalled(goal, d) for d in wander)
-    assert agent.wayfinder.progress.stalled(goal, 8.0)
+    assert not any(progress.stalled(goal, d, mapped + 100 * k) for k, d in enumerate(wander))
+    assert progress.stalled(goal, 8.0, mapped + 700)
     # Real progress restarts the count, and so does a new goal.
-    assert not agent.wayfinder.progress.stalled(goal, 7.0)
-    assert not agent.wayfinder.progress.stalled((20, 20), 9.0)
+    assert not progress.stalled(goal, 7.0, mapped + 700)
+    assert not progress.stalled((20, 20), 9.0, mapped + 700)
     with pytest.raises(L3MVNError, match="goal_patience_steps"):
         AgentConfig(goal_patience_steps=0)
+
+
+def test_a_detour_that_keeps_mapping_new_floor_is_not_given_up(env):
+    # Round walls it could not see, the planned way grows for a while: not circling, as each step
+    # the walk maps another 2 m2 (800 cells) of floor.
+    agent = _agent(env, goal_patience_steps=5)
+    agent.reset(_episode())
+    progress, goal = agent.wayfinder.progress, (10, 10)
+    detour = [8.0 + 0.2 * k for k in range(20)]
+    assert not any(progress.stalled(goal, d, 1000 + 800 * k) for k, d in enumerate(detour))
+    # Once the map stops growing, the patience runs out as before.
+    assert [progress.stalled(goal, 12.0, 1000 + 800 * 19) for _ in range(5)] == [False] * 4 + [True]
 
 
 def _walled_target_map(agent_cell):

@@ -126,6 +126,7 @@ def test_with_frame_changes_only_the_frame():
         "agent.commitment_margin=-0.1",
         "agent.explore_goal_dilation_m=-0.1",
         "agent.blocked_frontier_gap_m=-0.1",
+        "agent.goal_progress_area_m2=-1",
     ],
 )
 def test_counts_and_distances_out_of_range_are_one_line_errors_naming_the_field(setting):

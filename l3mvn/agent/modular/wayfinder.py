@@ -28,23 +28,29 @@ Goal = Cell | np.ndarray  # a map cell, or a mask of the target's cells
 
 @dataclass
 class GoalProgress:
-    """Whether the goal pursued has come ``goal_progress_m`` nearer within ``goal_patience_steps``: a
-    path through unknown space that keeps meeting new walls stays "reachable" while the agent circles."""
+    """Whether the goal pursued has come ``goal_progress_m`` nearer, or the walk has mapped
+    ``progress_cells`` new cells, within ``goal_patience_steps``: a path through unknown space that
+    keeps meeting new walls stays "reachable" while the agent circles, and circling maps nothing new."""
 
     patience_steps: int
     progress_m: float
+    progress_cells: float
     _goal: Cell | None = None
     _best_m: float = math.inf
+    _mapped: int = 0
     _since: int = 0
 
     def reset(self) -> None:
-        self._goal, self._best_m, self._since = None, math.inf, 0
+        self._goal, self._best_m, self._mapped, self._since = None, math.inf, 0, 0
 
-    def stalled(self, goal: Cell, distance_m: float) -> bool:
-        """Record this step's distance to ``goal``; True once it has gone the patience without
-        coming nearer (a new goal, or real progress, starts the count again)."""
+    def stalled(self, goal: Cell, distance_m: float, mapped_cells: int) -> bool:
+        """Record this step's distance to ``goal`` and the map's explored cell count; True once it has
+        gone the patience without either (a new goal, or real progress, starts the count again)."""
         if goal != self._goal or distance_m < self._best_m - self.progress_m:
-            self._goal, self._best_m, self._since = goal, distance_m, 0
+            self._goal, self._best_m, self._mapped, self._since = goal, distance_m, mapped_cells, 0
+            return False
+        if mapped_cells >= self._mapped + self.progress_cells:
+            self._best_m, self._mapped, self._since = min(self._best_m, distance_m), mapped_cells, 0
             return False
         self._since += 1
         return self._since >= self.patience_steps
@@ -83,7 +89,12 @@ class Wayfinder:
         self.config, self.cfg = config, config.agent
         self.planner = planner
         self.search, self.explore = search, explore
-        self.progress = GoalProgress(self.cfg.goal_patience_steps, self.cfg.goal_progress_m)
+        self.progress = GoalProgress(
+            self.cfg.goal_patience_steps,
+            self.cfg.goal_progress_m,
+            self.cfg.goal_progress_area_m2 / config.map.resolution_m**2,
+        )
+        self._mapped = 0  # explored cells of the map the last plan was made on
         self.escape = Escape()
         self.unreachable = 0  # consecutive steps whose goal was unreachable
 
@@ -95,6 +106,7 @@ class Wayfinder:
     def plan(self, sem_map: SemanticMap, goal: Goal, kind: GoalKind, last_move: float | None) -> Plan:
         """The next action towards ``goal``: how near is reached and how wide the goal is drawn
         depend on its ``kind``."""
+        self._mapped = int(np.count_nonzero(sem_map.explored))
         if kind == GoalKind.TARGET and self.config.task.success_rule == "semexp":
             # That rule measures straight-line distance, through walls: head for the nearest cell
             # within stop distance of the target, which may be the far side of its room's wall
@@ -121,7 +133,7 @@ class Wayfinder:
         )
 
     def stalled(self, goal: Cell, plan: Plan) -> bool:
-        return self.progress.stalled(goal, plan.distance_to_goal_m)
+        return self.progress.stalled(goal, plan.distance_to_goal_m, self._mapped)
 
     def done_with(self, goal: Cell, plan: Plan) -> bool:
         """Reached, unreachable, or no nearer for the patience: time for another goal."""

@@ -49,6 +49,9 @@ class AgentConfig:
     # while the agent circles (a policy that keeps its goal, random sample, would circle for hundreds of steps).
     goal_patience_steps: int = 40
     goal_progress_m: float = 0.5  # ... "closer" means by at least this much
+    # ... and a walk that maps this much new floor meanwhile is progressing too: a detour round walls
+    # it could not see lengthens the planned way for a while, but it is not circling.
+    goal_progress_area_m2: float = 2.0
     # Reaching a goal is not seeing it: an exploration goal or a glimpsed target counts as looked at
     # only once it lies within this angle of the view's centre (the 79-degree view's half is 39.5).
     # Without it a frontier at a door reads as reached from beside the door, is blocked, and the
@@ -104,9 +107,11 @@ class AgentConfig:
             or self.commitment_margin < 0
             or self.explore_goal_dilation_m < 0
             or self.blocked_frontier_gap_m < 0
+            or self.goal_progress_area_m2 < 0
         ):
             raise L3MVNError(
-                "look_min_area_m2, commitment_margin, explore_goal_dilation_m and blocked_frontier_gap_m must be >= 0"
+                "look_min_area_m2, commitment_margin, explore_goal_dilation_m, blocked_frontier_gap_m and "
+                "goal_progress_area_m2 must be >= 0"
             )
         if not 0 < self.frontier_press_m < self.frontier_reached_m:
             raise L3MVNError("frontier_press_m must satisfy 0 < frontier_press_m < frontier_reached_m")
