@@ -64,7 +64,11 @@ RULES = (
         ("agent.glimpse_min_fraction=0.999", "agent.glimpse_max_fraction=1.0"),
     ),
     Rule("far_areas", "visit areas seen only from afar before wandering", ("agent.look_min_area_m2=1e9",)),
-    Rule("patience", "give up a goal not come closer to in 40 steps", ("agent.goal_patience_steps=100000",)),
+    Rule(
+        "patience",
+        "give up a goal not come closer to, nor mapped 2 m2 of new floor, in 40 steps",
+        ("agent.goal_patience_steps=100000",),
+    ),
     Rule(
         "done_frontier_only",
         "a done frontier goal blocks only what is left of that frontier, not other openings within 1 m",
