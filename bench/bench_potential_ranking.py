@@ -68,7 +68,7 @@ def _episode(job: tuple[str, str, int, PotentialConfig]) -> list[tuple[str, floa
     eset = load_episode_set(dataset, split, cfg=CFG)
     ep, scene = eset.episodes[index], eset.scene_of(eset.episodes[index])
     model = PotentialModel.load(pc.checkpoint, pc)
-    policy, truth = PotentialPolicy(model, pc), HouseTruth(scene, pc, RevealOptions())
+    policy, truth = PotentialPolicy(model, pc, CFG.frontiers.cu_lambda), HouseTruth(scene, pc, RevealOptions())
     runner = Runner(CFG, config_hash="bench")
     distances = partial(ObjectDistances(runner.floor(scene).task), ep.goal)
     session = runner.session(scene, "cost-utility")

@@ -70,7 +70,11 @@ def test_joined_walks_keep_every_choice_as_it_was(walked):
         for got, want in zip(joined.frontiers(k)[2], part.frontiers(i)[2]):
             np.testing.assert_array_equal(got, want)
         np.testing.assert_array_equal(joined.features[k], part.features[i])
+        np.testing.assert_array_equal(joined.size_m(k), part.size_m(i))
+        assert len(joined.size_m(k)) == len(joined.frontiers(k)[0])
         assert joined.choice[k] == part.choice[i] and joined.goal[k] == part.goal[i]
+    # The size bonus is cost-utility's utility over its lambda: never negative, and wider frontiers earn some.
+    assert (joined.frontier_size_m >= 0).all() and joined.frontier_size_m.max() > 0
     empty = WalkSet.join([], 32)
     assert len(empty) == 0 and empty.features.shape == (0, len(CHANNELS), 32, 32)
 
@@ -79,7 +83,12 @@ def test_joined_walks_keep_every_choice_as_it_was(walked):
 BED = GOAL_CATEGORIES.index("bed")
 
 
-def _choice(metres_bed: tuple[float, float], cost: tuple[float, float] = (1.0, 1.0), choice: int = 0) -> WalkSet:
+def _choice(
+    metres_bed: tuple[float, float],
+    cost: tuple[float, float] = (1.0, 1.0),
+    choice: int = 0,
+    size_m: tuple[float, float] = (0.0, 0.0),
+) -> WalkSet:
     """One choice between two frontiers read at network cells 0 and 5 of a 4x4 window; only the bed
     is in the house."""
     metres = np.full((2, len(GOAL_CATEGORIES)), np.nan, np.float32)
@@ -94,6 +103,7 @@ def _choice(metres_bed: tuple[float, float], cost: tuple[float, float] = (1.0, 1
         frontier_metres=metres,
         cell_frontier=np.array([0, 1], np.int32),
         cell_index=np.array([0, 5], np.int32),
+        frontier_size_m=np.array(size_m, np.float32),
     )
 
 
@@ -138,13 +148,28 @@ def test_choice_regret_is_the_true_total_of_the_frontier_the_policy_takes_less_t
     assert right["regret_m"] == 0.0 and right["choices"] == 1
 
 
-def test_expected_totals_are_the_same_numbers_for_numpy_and_torch():
+def test_expected_totals_are_the_same_numbers_for_numpy_and_torch_with_the_size_bonus_where_set():
     cost, potentials = np.array([1.0, 4.0]), np.random.default_rng(0).random((2, len(OUTPUTS)))
-    cfg = PotentialConfig()
-    got = expected_totals(cost, potentials, cfg)
-    want = cost[:, None] - cfg.area_bonus_m * potentials[:, :1] + cfg.range_m * (1.0 - potentials[:, 1:])
-    np.testing.assert_allclose(got, want)
-    np.testing.assert_allclose(expected_totals(torch.tensor(cost), torch.tensor(potentials), cfg).numpy(), want)
+    size = np.array([0.5, 2.0])
+    for cfg, less in ((PotentialConfig(), size), (PotentialConfig(size_bonus=False), 0.0)):
+        got = expected_totals(cost, potentials, cfg, size)
+        want = (cost - less)[:, None] - cfg.area_bonus_m * potentials[:, :1] + cfg.range_m * (1.0 - potentials[:, 1:])
+        np.testing.assert_allclose(got, want)
+        from_torch = expected_totals(torch.tensor(cost), torch.tensor(potentials), cfg, torch.tensor(size))
+        np.testing.assert_allclose(from_torch.numpy(), want)
+
+
+def test_the_loss_and_regret_read_the_size_bonus_the_policy_adds():
+    # Bed 2 m beyond frontier 0 and 4 m beyond frontier 1, the potentials say so; frontier 1 is 3 m
+    # wider by the size bonus: with the bonus the totals the policy compares prefer it (regret 2 m),
+    # without it they do not (regret 0), and the loss is lower for the criterion that orders them right.
+    walks = _choice((2.0, 4.0), size_m=(0.0, 3.0))
+    logits = _logits((float(np.log(5.0)), float(np.log(2.0))))  # potentials 10/12 and 8/12: 2 and 4 m on
+    on, off = PotentialConfig(), PotentialConfig(size_bonus=False)
+    assert choice_regret(_Fixed(logits), walks, on)["regret_m"] == pytest.approx(2.0)
+    assert choice_regret(_Fixed(logits), walks, off)["regret_m"] == 0.0
+    idx = np.array([0])
+    assert float(_walk_loss(logits, walks, idx, off, tau_m=1.0)) < float(_walk_loss(logits, walks, idx, on, tau_m=1.0))
 
 
 # --- the stage ------------------------------------------------------------------------------------------------
@@ -167,13 +192,14 @@ def _error_line(capsys) -> str:
 
 
 def test_poni_train_walks_after_drawing_and_continues_from_a_checkpoint(tmp_path, capsys):
-    first = tmp_path / "first.pt"
+    first, plain = tmp_path / "first.pt", PotentialConfig(size_bonus=False)
     draw = ["--procedural-houses", "2", "--samples-per-procedural", "2", "--epochs", "1", "--width", "8"]
     walk = ["--walk-procedural-houses", "2", "--walk-episodes-per-procedural", "1", "--walk-epochs", "1"]
-    assert main(["poni", "train", *draw, *walk, "--workers", "1", "--out", str(first)]) == 0
+    assert main(["poni", "train", *draw, *walk, "--no-size-bonus", "--workers", "1", "--out", str(first)]) == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert summary["windows"]["train"] >= 1 and summary["windows"]["walks_train"] >= 1
-    shown = PotentialModel.load(first, PotentialConfig()).training
+    assert PotentialModel.load(first, plain).geometry["size_bonus"] == 0.0  # trained for the policy without it
+    shown = PotentialModel.load(first, plain).training
     assert [row["walk_epoch"] for row in shown["walk_history"]] == [0, 1] and len(shown["history"]) == 1
     assert shown["options"]["walk_epochs"] == 1 and shown["init"] is None
     second = tmp_path / "second.pt"
@@ -182,9 +208,10 @@ def test_poni_train_walks_after_drawing_and_continues_from_a_checkpoint(tmp_path
     capsys.readouterr()
     again = PotentialModel.load(second, PotentialConfig())
     assert again.training["init"] == str(first) and again.training["history"] == []
+    # Fine-tuning may change the criterion: the second checkpoint is for the policy with the size bonus.
     assert again.geometry == {k: float(getattr(PotentialConfig(), k)) for k in GEOMETRY}
     for mine, theirs in zip(
-        again.net.state_dict().values(), PotentialModel.load(first, PotentialConfig()).net.state_dict().values()
+        again.net.state_dict().values(), PotentialModel.load(first, plain).net.state_dict().values()
     ):
         assert torch.equal(mine, theirs)  # no stage had data or epochs: the weights it started from
     # PONI walks with the checkpoint it fine-tunes, and its walks are its own choices, not cost-utility's.
@@ -193,7 +220,7 @@ def test_poni_train_walks_after_drawing_and_continues_from_a_checkpoint(tmp_path
     assert main(["poni", "train", *own, "--workers", "1", "--out", str(third)]) == 0
     assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["windows"]["walks_train"] >= 1
     assert PotentialModel.load(third, PotentialConfig()).training["options"]["walker"] == "poni"
-    poni = replace(PotentialConfig(), checkpoint=str(first))
+    poni = replace(plain, checkpoint=str(first))
     by = {w: walk_floor(WalkJob(0, 2, 1, FRAME, poni, w)) for w in ("cost-utility", "poni")}
     assert not np.array_equal(by["poni"].frontier_cost, by["cost-utility"].frontier_cost)
 
@@ -213,9 +240,11 @@ def test_poni_train_refuses_bad_walk_settings_in_one_line(tmp_path, capsys, argv
     assert says in _error_line(capsys) and not (tmp_path / "x.pt").exists()
 
 
-def test_the_shipped_checkpoint_went_through_both_stages_and_records_its_scores():
-    training = PotentialModel.load(None, PotentialConfig()).training
-    assert training["history"] and training["walk_history"] and training["init"] is None
+def test_the_shipped_checkpoint_went_through_both_stages_then_the_size_bonus_and_records_its_scores():
+    model = PotentialModel.load(None, PotentialConfig())
+    training, before = model.training, model.training["previous"]
+    assert before["history"] and before["walk_history"] and before["init"] is None  # both stages, from scratch
+    assert training["walk_history"] and not training["history"] and model.geometry["size_bonus"] == 1.0
     assert training["houses"]["test"] and not set(training["houses"]["test"]) & set(training["houses"]["val"])
     for split in ("walks_val", "walks_test"):
         scores = training["scores"][split]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -313,6 +314,20 @@ def test_a_missing_unreadable_or_foreign_checkpoint_is_refused_in_one_line(tmp_p
         assert says in _one_line_error(PotentialModel.load, tmp_path / name, SMALL), name
 
 
+def test_a_checkpoint_fixes_its_size_bonus_and_one_saved_before_it_existed_was_trained_without(tmp_path):
+    path = tmp_path / "poni.pt"
+    _model().save(path)  # trained with the size bonus (the default)
+    without = replace(SMALL, size_bonus=False)
+    message = _one_line_error(PotentialModel.load, path, without)
+    assert "poni.size_bonus=true (config false)" in message
+    assert PotentialModel.load(path, without, to_fine_tune=True).geometry["size_bonus"] == 1.0
+    blob = torch.load(path, weights_only=True)
+    older = tmp_path / "older.pt"
+    torch.save({**blob, "geometry": {k: v for k, v in blob["geometry"].items() if k != "size_bonus"}}, older)
+    assert PotentialModel.load(older, without).geometry["size_bonus"] == 0.0
+    assert "poni.size_bonus=false (config true)" in _one_line_error(PotentialModel.load, older, SMALL)
+
+
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="no /dev/full to stand for a full disk")
 def test_a_checkpoint_that_cannot_be_written_is_one_error_and_leaves_no_part_file(tmp_path):
     assert "PONI checkpoint" in _one_line_error(_model().save, "/dev/full")
@@ -323,7 +338,8 @@ def test_a_checkpoint_that_cannot_be_written_is_one_error_and_leaves_no_part_fil
 
 # --- the policy ---------------------------------------------------------------------------------------------
 # An 8-cell window of 0.2 m on a 64-cell map of 5 cm, the agent in the middle: map cells 16-47 are in it.
-POLICY_CFG = PotentialConfig(input_window_m=1.6, range_m=12.0, area_bonus_m=3.0)
+# The arithmetic tests read the area bonus alone; the size bonus has its own below.
+POLICY_CFG = PotentialConfig(input_window_m=1.6, range_m=12.0, area_bonus_m=3.0, size_bonus=False)
 
 
 def _sem_map(n: int = 64) -> SemanticMap:
@@ -332,9 +348,16 @@ def _sem_map(n: int = 64) -> SemanticMap:
     return _map(explored, np.zeros_like(explored))
 
 
-def _frontier(i: int, cells: list[tuple[int, int]], cost: float) -> Frontier:
+def _frontier(i: int, cells: list[tuple[int, int]], cost: float, utility: float = 1.0) -> Frontier:
     return Frontier(
-        id=i, cells=np.array(cells), center=cells[0], size=len(cells), distance_m=cost, utility=1.0, cost=cost, s_cu=0.5
+        id=i,
+        cells=np.array(cells),
+        center=cells[0],
+        size=len(cells),
+        distance_m=cost,
+        utility=utility,
+        cost=cost,
+        s_cu=0.5,
     )
 
 
@@ -343,15 +366,15 @@ AT = {0: (1, 1), 1: (6, 6)}
 CELLS = {0: [(20, 20), (21, 22)], 1: [(40, 40)], 2: [(2, 3), (60, 61)]}
 
 
-def _policy(monkeypatch, predicted: np.ndarray) -> PotentialPolicy:
-    model = _model(POLICY_CFG)
+def _policy(monkeypatch, predicted: np.ndarray, cfg: PotentialConfig = POLICY_CFG) -> PotentialPolicy:
+    model = _model(cfg)
 
     def predict(features: np.ndarray) -> np.ndarray:
         assert features.shape == (len(CHANNELS), 8, 8) and features[0].any()
         return predicted
 
     monkeypatch.setattr(model, "predict", predict)
-    return PotentialPolicy(model, POLICY_CFG)
+    return PotentialPolicy(model, cfg, 40.0)
 
 
 def _potentials(area: float = 0.5, objects: float = 0.5, at: dict | None = None) -> np.ndarray:
@@ -424,6 +447,25 @@ def test_the_selection_records_every_goals_potential_and_its_metres_and_a_potent
     assert fusion.compared == pytest.approx((5.25, 6.25, 14.0))  # cost - bonus + 12 x (1 - p)
     assert chosen.scores.tolist() == pytest.approx([1.0, 1.0 - 1.0 / 8.75, 0.0])
     assert chosen.reason.startswith("PONI: 3.0 m to frontier")
+
+
+def test_the_size_bonus_is_cost_utilitys_utility_over_lambda_and_the_record_names_it(monkeypatch):
+    sized = replace(POLICY_CFG, size_bonus=True)
+    predicted = _potentials(area=0.0, at={("bed", 1): 0.6})  # frontier 1: 12 x 0.1 = 1.2 m nearer the bed
+    frontiers = [_frontier(0, CELLS[0], 2.0, utility=120.0), _frontier(1, CELLS[1], 2.0, utility=40.0)]
+    chosen = _policy(monkeypatch, predicted, sized).select(frontiers, _sem_map(), "bed", np.random.default_rng(0))
+    assert chosen.frontier == 0  # 3 m of size bonus against 1 m outweighs 1.2 m nearer the bed
+    assert chosen.fusion.bonus_m == pytest.approx((3.0, 1.0)) and chosen.fusion.compared == pytest.approx((5.0, 5.8))
+    assert "frontier size" in chosen.fusion.describe() and "3.0 m bonus" in chosen.reason
+    plain = _policy(monkeypatch, predicted).select(frontiers, _sem_map(), "bed", np.random.default_rng(0))
+    assert plain.frontier == 1 and "frontier size" not in plain.fusion.describe()
+
+
+def test_a_size_bonus_without_a_positive_cu_lambda_is_refused_in_one_line():
+    sized = replace(POLICY_CFG, size_bonus=True)
+    message = _one_line_error(PotentialPolicy, _model(sized), sized, 0.0)
+    assert "frontiers.cu_lambda must be positive" in message and "poni.size_bonus=false" in message
+    assert PotentialPolicy(_model(POLICY_CFG), POLICY_CFG, 0.0).cu_lambda == 0.0
 
 
 def test_no_frontier_gives_no_selection_and_an_unknown_goal_is_refused(monkeypatch):

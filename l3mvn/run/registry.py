@@ -149,14 +149,16 @@ def _head_ready(name: str) -> Callable[[Config], None]:
 
 
 def _poni_ready(config: Config) -> None:
-    _potential_model(config.poni.checkpoint, config.poni)
+    from l3mvn.agent.potentials import PotentialPolicy
+
+    PotentialPolicy(_potential_model(config.poni.checkpoint, config.poni), config.poni, config.frontiers.cu_lambda)
 
 
 def _poni(ctx: PolicyContext) -> GlobalPolicy:
     from l3mvn.agent.potentials import PotentialPolicy
 
     cfg = ctx.config.poni
-    return PotentialPolicy(_potential_model(cfg.checkpoint, cfg), cfg)
+    return PotentialPolicy(_potential_model(cfg.checkpoint, cfg), cfg, ctx.config.frontiers.cu_lambda)
 
 
 def _teleop(ctx: PolicyContext) -> Policy:

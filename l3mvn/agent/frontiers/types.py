@@ -31,10 +31,11 @@ class Fusion:
     case of ``rule`` that fired: paper ``language`` (max S_LLM above B), ``exploration`` (below B) or
     ``fused`` (inside B); official_code ``language``, ``first above 0.1`` or ``utility``; expected
     and potentials ``least total`` (potentials is PONI's: ``s_llm`` holds the goal's object
-    potential, ``explore`` the area potential, ``bonus_m`` the area bonus). ``compared`` is what the
-    rule ranked by: paper the fused score, official_code S_LLM with the no-object stand-in, expected
-    and potentials the total metres (least wins). ``choice`` is the rule's pick, which the agent's
-    commitment may overrule in favour of the frontier it already pursues.
+    potential, ``explore`` the area potential, ``bonus_m`` the area and size bonus, ``exploration``
+    which bonuses). ``compared`` is what the rule ranked by: paper the fused score, official_code
+    S_LLM with the no-object stand-in, expected and potentials the total metres (least wins).
+    ``choice`` is the rule's pick, which the agent's commitment may overrule in favour of the
+    frontier it already pursues.
     """
 
     rule: str
@@ -66,8 +67,8 @@ class Fusion:
             )
         if self.rule == POTENTIALS_RULE:
             return (
-                "PONI: least metres to the frontier - area bonus + expected metres on to the goal (from the "
-                "object potential): " + self._versus(self.compared, least=True, fmt=self._total)
+                f"PONI: least metres to the frontier - bonus ({self.exploration}) + expected metres on to the "
+                "goal (from the object potential): " + self._versus(self.compared, least=True, fmt=self._total)
             )
         if self.rule == "official_code":  # S_LLM as compared: a frontier without objects counts 0.1 + 0.1 U / max U
             head = f"official code: max S_LLM {max(self.compared):.2f}"

@@ -23,7 +23,17 @@ from l3mvn.core.errors import L3MVNError, first_line
 from l3mvn.core.paths import PACKAGE_DATA
 from l3mvn.core.writing import replacing
 
-GEOMETRY = ("cell_m", "input_window_m", "range_m", "area_scale_m2")  # the PotentialConfig fields a checkpoint fixes
+# The PotentialConfig fields a checkpoint fixes (size_bonus as 0 / 1); a checkpoint saved before
+# size_bonus existed was trained without it.
+GEOMETRY = ("cell_m", "input_window_m", "range_m", "area_scale_m2", "size_bonus")
+_SAVED_BEFORE = {"size_bonus": 0.0}
+
+
+def _shown(name: str, value: float | None) -> str:
+    """A geometry value as ``--set`` takes it (the size bonus as true / false)."""
+    if name == "size_bonus" and value is not None:
+        return "true" if value else "false"
+    return str(value)
 
 
 def shipped_checkpoint() -> Path:
@@ -78,9 +88,10 @@ class PotentialModel:
     source: str = ""
 
     @classmethod
-    def load(cls, path: str | Path | None, cfg: PotentialConfig) -> PotentialModel:
+    def load(cls, path: str | Path | None, cfg: PotentialConfig, to_fine_tune: bool = False) -> PotentialModel:
         """The checkpoint at ``path`` (None: the shipped one), refused in one line when missing,
-        unreadable, of another layout, or trained with other geometry than ``cfg``'s."""
+        unreadable, of another layout, or trained with other geometry than ``cfg``'s; ``to_fine_tune``:
+        its size bonus may differ from ``cfg``'s (training changes the criterion it learned through)."""
         file = Path(path) if path is not None else shipped_checkpoint()
         if not file.is_file():
             where = "the shipped checkpoint" if path is None else "poni.checkpoint"
@@ -96,11 +107,12 @@ class PotentialModel:
                 f"{file} was trained on channels {list(blob['channels'])} -> {list(blob['outputs'])}; this "
                 f"version reads {list(CHANNELS)} -> {list(OUTPUTS)}: retrain it with `l3mvn poni train`"
             )
-        geometry = {k: float(v) for k, v in dict(blob["geometry"]).items()}
+        geometry = _SAVED_BEFORE | {k: float(v) for k, v in dict(blob["geometry"]).items()}
         wanted = {k: float(getattr(cfg, k)) for k in GEOMETRY}
-        wrong = [k for k in GEOMETRY if not math.isclose(geometry.get(k, math.nan), wanted[k], rel_tol=1e-6)]
+        fixed = [k for k in GEOMETRY if not (to_fine_tune and k == "size_bonus")]
+        wrong = [k for k in fixed if not math.isclose(geometry.get(k, math.nan), wanted[k], rel_tol=1e-6)]
         if wrong:
-            said = ", ".join(f"poni.{k}={geometry.get(k)} (config {wanted[k]})" for k in wrong)
+            said = ", ".join(f"poni.{k}={_shown(k, geometry.get(k))} (config {_shown(k, wanted[k])})" for k in wrong)
             raise L3MVNError(f"{file} was trained with {said}: set those, or retrain with the config's")
         net = PotentialNet(width=int(blob["width"]))
         try:

@@ -1,13 +1,14 @@
-"""PONI as a global policy: the frontier with the least (travel + expected metres on to the goal),
-both read from the potentials the network predicts on the agent's map.
+"""PONI as a global policy: the frontier with the least (travel + expected metres on to the goal, less
+the bonuses of an exploring agent), read from the potentials the network predicts on the agent's map.
 
 A frontier's potentials are the best over its cells (its label in training is the best over its
 cells too: the cell nearest the goal, the cell that opens the most floor). The object potential p of
 the goal becomes metres as the training defined it, ``range_m x (1 - p)``; the area potential earns a
 bonus of ``area_bonus_m`` metres at 1, the part of PONI that prefers frontiers opening onto much
-unexplored floor when no goal is expected near any of them. This is the frontier oracle's criterion
-with the network in place of the ground truth, and the "expected" rule of the language policies with
-the area potential in place of the frontier's size.
+unexplored floor when no goal is expected near any of them; with ``size_bonus`` a frontier also earns
+cost-utility's size bonus U / lambda, the preference for wide openings that cost-utility owes its
+SPL to. This is the frontier oracle's criterion with the network in place of the ground truth, and the
+"expected" rule of the language policies with the area potential beside the frontier's size.
 """
 
 from __future__ import annotations
@@ -26,18 +27,32 @@ from l3mvn.core.config import PotentialConfig
 from l3mvn.core.errors import L3MVNError
 
 
-def expected_totals(cost: Any, potentials: Any, cfg: PotentialConfig) -> Any:
+def expected_totals(cost: Any, potentials: Any, cfg: PotentialConfig, size_m: Any) -> Any:
     """(F, goals) metres the policy minimises, per frontier and goal: travel ``cost`` (F,) less the
-    area bonus plus the expected metres on, from ``potentials`` (F, len(OUTPUTS)). Plain arithmetic,
-    so numpy arrays (the policy) and torch tensors (the training loss) give the same numbers."""
+    area bonus and, where ``cfg.size_bonus``, the size bonus ``size_m`` (F,), plus the expected metres
+    on, from ``potentials`` (F, len(OUTPUTS)). Plain arithmetic, so numpy arrays (the policy) and
+    torch tensors (the training loss) give the same numbers."""
+    if cfg.size_bonus:
+        cost = cost - size_m
     return cost[:, None] - cfg.area_bonus_m * potentials[:, :1] + cfg.range_m * (1.0 - potentials[:, 1:])
+
+
+def size_bonus_m(frontiers: list[Frontier], cu_lambda: float) -> np.ndarray:
+    """Each frontier's size bonus in metres: cost-utility's utility over its lambda, as the expected
+    rule of the language policies reads it."""
+    return np.array([f.utility / cu_lambda for f in frontiers], dtype=np.float64)
 
 
 class PotentialPolicy:
     name = "poni"
 
-    def __init__(self, model: PotentialModel, cfg: PotentialConfig) -> None:
-        self.model, self.cfg = model, cfg
+    def __init__(self, model: PotentialModel, cfg: PotentialConfig, cu_lambda: float) -> None:
+        if cfg.size_bonus and not (np.isfinite(cu_lambda) and cu_lambda > 0):
+            raise L3MVNError(
+                f"poni.size_bonus reads the size bonus as U / lambda: frontiers.cu_lambda must be positive, "
+                f"got {cu_lambda} (or set poni.size_bonus=false with a checkpoint trained without it)"
+            )
+        self.model, self.cfg, self.cu_lambda = model, cfg, cu_lambda
 
     def frontier_potentials(self, frontiers: list[Frontier], sem_map: SemanticMap) -> np.ndarray:
         """(len(frontiers), len(OUTPUTS)): each frontier's best potential over its cells in the window
@@ -64,8 +79,9 @@ class PotentialPolicy:
         metres = self.cfg.range_m * (1.0 - objects)
         on = metres[:, OUTPUTS.index(goal) - 1]
         cost = np.array([f.cost for f in frontiers], dtype=np.float64)
-        bonus = self.cfg.area_bonus_m * area
-        total = expected_totals(cost, potentials, self.cfg)[:, OUTPUTS.index(goal) - 1]
+        size = size_bonus_m(frontiers, self.cu_lambda) if self.cfg.size_bonus else np.zeros(len(frontiers))
+        bonus = self.cfg.area_bonus_m * area + size
+        total = expected_totals(cost, potentials, self.cfg, size)[:, OUTPUTS.index(goal) - 1]
         i, fused = least_total(total)
         target = objects[:, OUTPUTS.index(goal) - 1]
         fusion = Fusion(
@@ -76,7 +92,7 @@ class PotentialPolicy:
             s_llm=tuple(map(float, target)),
             explore=tuple(map(float, area)),
             compared=tuple(map(float, total)),
-            exploration="area potential",
+            exploration="area potential and frontier size" if self.cfg.size_bonus else "area potential",
             cost_m=tuple(map(float, cost)),
             bonus_m=tuple(map(float, bonus)),
             expected_m=tuple(map(float, on)),
@@ -94,7 +110,7 @@ class PotentialPolicy:
             for row, p_goal, v, far in zip(objects, target, fused, metres)
         )
         reason = (
-            f"PONI: {cost[i]:.1f} m to frontier - {bonus[i]:.1f} m area bonus + {on[i]:.1f} m expected on "
+            f"PONI: {cost[i]:.1f} m to frontier - {bonus[i]:.1f} m bonus + {on[i]:.1f} m expected on "
             f"= {total[i]:.1f} m (least)"
         )
         return Selection(i, frontiers[i].center, fused, reason, scores, fusion)

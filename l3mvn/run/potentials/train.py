@@ -271,7 +271,9 @@ def _walk_loss(
         bce = torch.nn.functional.binary_cross_entropy_with_logits(per_frontier[:, 1:], target, reduction="none")
         point = point + (bce * mask).sum()
         n_point += int(known.sum())
-        totals = expected_totals(torch.from_numpy(cost), torch.sigmoid(per_frontier), cfg)
+        totals = expected_totals(
+            torch.from_numpy(cost), torch.sigmoid(per_frontier), cfg, torch.from_numpy(walks.size_m(int(i)))
+        )
         true = torch.from_numpy(cost[:, None] + np.nan_to_num(metres))
         for g in range(metres.shape[1]):
             ok = torch.from_numpy(np.isfinite(metres[:, g]))
@@ -300,7 +302,8 @@ def choice_regret(net: PotentialNet, walks: WalkSet, cfg: PotentialConfig, batch
         for s, i in enumerate(idx):
             cost, metres, cells = walks.frontiers(int(i))
             per_frontier, _ = _frontier_logits(logits[s].reshape(len(OUTPUTS), -1), cells)
-            totals = expected_totals(cost.astype(np.float64), torch.sigmoid(per_frontier).numpy(), cfg)
+            size = walks.size_m(int(i)).astype(np.float64)
+            totals = expected_totals(cost.astype(np.float64), torch.sigmoid(per_frontier).numpy(), cfg, size)
             for g in range(metres.shape[1]):
                 known = np.isfinite(metres[:, g])
                 if not known.any():
@@ -401,7 +404,7 @@ def train_potentials(
         raise L3MVNError(f"unknown walker {options.walker!r}; valid: {', '.join(WALKERS)}")
     if options.walker == "poni" and init is None:
         raise L3MVNError("--walker poni walks with the checkpoint it fine-tunes: give --init CHECKPOINT")
-    start = PotentialModel.load(init, cfg) if init is not None else None
+    start = PotentialModel.load(init, cfg, to_fine_tune=True) if init is not None else None
     net = start.net if start is not None else PotentialNet(width=options.width)
     options = replace(options, width=net.width)
 
@@ -447,7 +450,10 @@ def train_potentials(
                 if done == total or done % 100 == 0:
                     log(f"walking {name} floors: {done}/{total}")
 
-            walking = replace(cfg, checkpoint=str(init)) if options.walker == "poni" else cfg
+            walking = cfg
+            if options.walker == "poni":  # PONI walks as its checkpoint was trained to
+                assert start is not None  # refused above without --init
+                walking = replace(cfg, checkpoint=str(init), size_bonus=bool(start.geometry["size_bonus"]))
             jobs = [WalkJob(src, n, options.seed + 1, frame, walking, options.walker) for src, n in walked[name]]
             walks[name] = walk_floors(jobs, options.workers, step)
             log(f"{name}: {len(walks[name])} choices from {len(jobs)} floors in {time.monotonic() - started:.0f} s")
@@ -513,6 +519,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=defaults.walker,
         help="who walks the second stage's episodes: cost-utility (no prior), or poni with the --init checkpoint",
     )
+    tr.add_argument(
+        "--no-size-bonus",
+        action="store_true",
+        help="the walks' totals leave out cost-utility's size bonus (for poni.size_bonus=false)",
+    )
     tr.add_argument("--seed", type=int, default=defaults.seed)
     tr.add_argument("--workers", type=_count, default=defaults.workers)
     show = sub.add_parser("show", help="what a checkpoint was trained on and how it scored")
@@ -527,7 +538,7 @@ def _count(raw: str) -> int:
 
 def run(args: argparse.Namespace) -> int:
     if args.poni_command == "show":
-        model = PotentialModel.load(args.checkpoint, PotentialConfig())
+        model = PotentialModel.load(args.checkpoint, PotentialConfig(), to_fine_tune=True)
         print(json.dumps({"checkpoint": model.source, "geometry": model.geometry, **model.training}, indent=2))
         return 0
     options = replace(
@@ -544,6 +555,7 @@ def run(args: argparse.Namespace) -> int:
         args.dataset,
         args.split,
         args.out or shipped_checkpoint(),
+        cfg=PotentialConfig(size_bonus=not args.no_size_bonus),
         options=options,
         init=args.init,
         log=lambda line: print(line, flush=True),

@@ -7,9 +7,9 @@ agent's own map. Here a map agent walks generated episodes on a floor: one that 
 the prior-free walker never draws (the states a policy trained on another's walks meets and was never
 taught: learning on its own visits is the remedy imitation learning calls DAgger). At each
 re-selection the sample is its map's window around it, and every frontier it chose among, with its
-travel cost, the network cells it is read at, and the ground-truth geodesic metres from it to the
-nearest instance of every goal the house holds (the frontier oracle's reading, so one walk labels six
-choices). The ground truth only enters the labels; the agent never reads it.
+travel cost and size bonus, the network cells it is read at, and the ground-truth geodesic metres
+from it to the nearest instance of every goal the house holds (the frontier oracle's reading, so one
+walk labels six choices). The ground truth only enters the labels; the agent never reads it.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from multiprocessing import get_context
 import numpy as np
 
 from l3mvn.agent.policies.oracle_frontier import frontier_goal_distances
-from l3mvn.agent.potentials import CHANNELS, WindowGrid, window_features
+from l3mvn.agent.potentials import CHANNELS, WindowGrid, size_bonus_m, window_features
 from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.config import Config, PotentialConfig
 from l3mvn.run.potentials.samples import Source, source_scene
@@ -38,9 +38,9 @@ class WalkSet:
     """Choices from walks. Sample i: ``features[i]`` (uint8, x 255), the episode's ``goal[i]``
     (index into GOAL_CATEGORIES) and the walking policy's ``choice[i]`` (index among its
     frontiers). Frontier rows (all samples' frontiers in order): ``frontier_sample``, travel
-    ``frontier_cost`` (m) and ``frontier_metres`` (per goal, NaN where the house lacks the goal or
-    the frontier lies off the true floor); cell rows: ``cell_frontier`` and ``cell_index`` (flat
-    network cell)."""
+    ``frontier_cost`` (m), ``frontier_metres`` (per goal, NaN where the house lacks the goal or
+    the frontier lies off the true floor) and ``frontier_size_m`` (the size bonus, m); cell rows:
+    ``cell_frontier`` and ``cell_index`` (flat network cell)."""
 
     features: np.ndarray
     goal: np.ndarray
@@ -51,6 +51,7 @@ class WalkSet:
     frontier_metres: np.ndarray
     cell_frontier: np.ndarray
     cell_index: np.ndarray
+    frontier_size_m: np.ndarray
 
     def __post_init__(self) -> None:
         self._frontiers = np.searchsorted(self.frontier_sample, np.arange(len(self.features) + 1))
@@ -64,6 +65,10 @@ class WalkSet:
         a, b = self._frontiers[i], self._frontiers[i + 1]
         cells = [self.cell_index[self._cells[j] : self._cells[j + 1]] for j in range(a, b)]
         return self.frontier_cost[a:b], self.frontier_metres[a:b], cells
+
+    def size_m(self, i: int) -> np.ndarray:
+        """Sample i's frontiers' size bonus (F,) in metres."""
+        return self.frontier_size_m[self._frontiers[i] : self._frontiers[i + 1]]
 
     @classmethod
     def join(cls, parts: list[WalkSet], cells: int) -> WalkSet:
@@ -83,6 +88,7 @@ class WalkSet:
             cat([p.frontier_metres for p in parts], np.zeros((0, len(GOAL_CATEGORIES)), np.float32)),
             cat([p.cell_frontier + o for p, o in zip(parts, frontiers)], np.zeros(0, np.int32)),
             cat([p.cell_index for p in parts], np.zeros(0, np.int32)),
+            cat([p.frontier_size_m for p in parts], np.zeros(0, np.float32)),
         )
 
 
@@ -119,7 +125,7 @@ def walk_floor(job: WalkJob) -> WalkSet:
         for g in GOAL_CATEGORIES
         if g in scene.categories and scene.category_mask(g).any()
     }
-    features, goals, choices, costs, metres, cell_lists = [], [], [], [], [], []
+    features, goals, choices, costs, sizes, metres, cell_lists = [], [], [], [], [], [], []
     for episode in episodes:
         session = runner.session(scene, job.walker)
         session.start(episode)
@@ -138,6 +144,7 @@ def walk_floor(job: WalkJob) -> WalkSet:
             goals.append(GOAL_CATEGORIES.index(episode.goal))
             choices.append(-1 if decision.chosen_frontier is None else decision.chosen_frontier)
             costs.append(np.array([f.cost for f in frontiers], dtype=np.float32))
+            sizes.append(size_bonus_m(frontiers, cfg.frontiers.cu_lambda).astype(np.float32))
             metres.append(np.where(np.isfinite(truth), truth, np.nan))
             cell_lists.append([grid.flat_cells(f.cells).astype(np.int32) for f in frontiers])
     if not features:
@@ -154,6 +161,7 @@ def walk_floor(job: WalkJob) -> WalkSet:
         np.concatenate(metres).astype(np.float32),
         np.repeat(np.arange(len(flat_cells), dtype=np.int32), [len(c) for c in flat_cells]),
         np.concatenate(flat_cells) if flat_cells else np.zeros(0, np.int32),
+        np.concatenate(sizes),
     )
 
 
