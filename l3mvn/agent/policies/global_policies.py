@@ -61,6 +61,12 @@ def least_total(total: np.ndarray) -> tuple[int, np.ndarray]:
     return i, scores
 
 
+def size_bonus_m(frontiers: list[Frontier], cu_lambda: float) -> np.ndarray:
+    """Each frontier's size bonus in metres, cost-utility's utility over its lambda: what the policies
+    that compare metres (the expected rule, PONI) credit a wide frontier with."""
+    return np.array([f.utility / cu_lambda for f in frontiers], dtype=np.float64)
+
+
 def _pick(frontiers: list[Frontier], scores: np.ndarray, reason: str) -> Selection:
     i = int(np.argmax(scores))
     return Selection(i, frontiers[i].center, scores, reason.format(f=frontiers[i]))

@@ -33,7 +33,7 @@ import numpy as np
 
 from l3mvn.agent.frontiers import Frontier, Fusion
 from l3mvn.agent.mapping import SemanticMap
-from l3mvn.agent.policies.global_policies import LanguageScore, Selection, least_total
+from l3mvn.agent.policies.global_policies import LanguageScore, Selection, least_total, size_bonus_m
 from l3mvn.core.config import SELECTIONS, FrontierConfig, PolicyConfig
 from l3mvn.core.config.policy import HEAD_SCORER, LLM_SCORER
 from l3mvn.core.errors import L3MVNError
@@ -199,7 +199,7 @@ class LanguageFrontierPolicy:
         """argmin of C - U / lambda + expected metres on; fused = that total min-max flipped into [0, 1]
         (1 = best), the scale the agent's commitment margin reads."""
         cost = np.array([f.cost for f in frontiers], dtype=np.float64)
-        bonus = np.array([f.utility / self.cu_lambda for f in frontiers], dtype=np.float64)
+        bonus = size_bonus_m(frontiers, self.cu_lambda)
         total = (cost - bonus) + metres
         i, fused = least_total(total)
         fusion = self._fusion(
@@ -216,7 +216,7 @@ class LanguageFrontierPolicy:
         return (
             i,
             (
-                f"expected: {frontiers[i].cost:.1f} m to frontier - {frontiers[i].utility / self.cu_lambda:.1f} m "
+                f"expected: {frontiers[i].cost:.1f} m to frontier - {bonus[i]:.1f} m "
                 f"size bonus + {metres[i]:.1f} m expected on = {total[i]:.1f} m (least)"
             ),
             fused,

@@ -6,7 +6,7 @@ frontiers. Training data comes from full house maps, then from a prior-free agen
 
 from l3mvn.agent.potentials.features import CHANNELS, OUTPUTS, WindowGrid, window_features
 from l3mvn.agent.potentials.model import PotentialModel, PotentialNet, shipped_checkpoint
-from l3mvn.agent.potentials.policy import PotentialPolicy, expected_totals, size_bonus_m
+from l3mvn.agent.potentials.policy import PotentialPolicy, expected_totals
 
 __all__ = [
     "CHANNELS",
@@ -17,6 +17,5 @@ __all__ = [
     "WindowGrid",
     "shipped_checkpoint",
     "expected_totals",
-    "size_bonus_m",
     "window_features",
 ]

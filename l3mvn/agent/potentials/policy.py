@@ -20,7 +20,7 @@ import numpy as np
 from l3mvn.agent.frontiers import Frontier, Fusion
 from l3mvn.agent.frontiers.types import POTENTIALS_RULE
 from l3mvn.agent.mapping import SemanticMap
-from l3mvn.agent.policies.global_policies import LanguageScore, Selection, least_total
+from l3mvn.agent.policies.global_policies import LanguageScore, Selection, least_total, size_bonus_m
 from l3mvn.agent.potentials.features import OUTPUTS, WindowGrid, window_features
 from l3mvn.agent.potentials.model import PotentialModel
 from l3mvn.core.config import PotentialConfig
@@ -35,12 +35,6 @@ def expected_totals(cost: Any, potentials: Any, cfg: PotentialConfig, size_m: An
     if cfg.size_bonus:
         cost = cost - size_m
     return cost[:, None] - cfg.area_bonus_m * potentials[:, :1] + cfg.range_m * (1.0 - potentials[:, 1:])
-
-
-def size_bonus_m(frontiers: list[Frontier], cu_lambda: float) -> np.ndarray:
-    """Each frontier's size bonus in metres: cost-utility's utility over its lambda, as the expected
-    rule of the language policies reads it."""
-    return np.array([f.utility / cu_lambda for f in frontiers], dtype=np.float64)
 
 
 class PotentialPolicy:

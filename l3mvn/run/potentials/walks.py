@@ -21,8 +21,9 @@ from multiprocessing import get_context
 
 import numpy as np
 
+from l3mvn.agent.policies.global_policies import size_bonus_m
 from l3mvn.agent.policies.oracle_frontier import frontier_goal_distances
-from l3mvn.agent.potentials import CHANNELS, WindowGrid, size_bonus_m, window_features
+from l3mvn.agent.potentials import CHANNELS, WindowGrid, window_features
 from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.config import Config, PotentialConfig
 from l3mvn.run.potentials.samples import Source, source_scene
