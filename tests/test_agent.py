@@ -17,6 +17,7 @@ from l3mvn.agent.modular import MapAgent
 from l3mvn.agent.policies.global_policies import NearestFrontier
 from l3mvn.core.config import AgentConfig, Config, SimConfig, TaskConfig
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.frames import CameraFrame
 from l3mvn.core.types import Action, Pose
 from l3mvn.run.session import EpisodeSession
 from l3mvn.world.episode import Episode
@@ -455,7 +456,7 @@ def test_a_target_seen_beyond_the_depth_range_is_walked_towards_until_it_maps(en
     goal_id = env.categories.index("toilet") + 1
     semantic[h // 2 - 2 : h // 2 + 2, w - 12 : w - 4] = goal_id  # right edge of the view, no depth
     depth[h // 2 - 2 : h // 2 + 2, w - 12 : w - 4] = 0.0
-    d = agent.act(dataclasses.replace(obs, semantic=semantic, depth=depth))
+    d = agent.act(dataclasses.replace(obs, frame=CameraFrame.of(obs.rgb, depth, semantic)))
     assert d.goal_kind == "glimpse"
     r, c = d.map.agent_cell
     gr, gc = d.long_term_goal
@@ -466,7 +467,9 @@ def test_a_target_seen_beyond_the_depth_range_is_walked_towards_until_it_maps(en
     assert math.hypot(gr - r, gc - c) * d.map.resolution_m == pytest.approx(agent.sim.max_depth_m, abs=0.1)
     # The same pixels with depth are an ordinary candidate: nothing to walk towards blindly.
     agent.reset(episode)
-    assert agent.act(dataclasses.replace(obs, semantic=semantic)).goal_kind != "glimpse"
+    assert (
+        agent.act(dataclasses.replace(obs, frame=CameraFrame.of(obs.rgb, obs.depth, semantic))).goal_kind != "glimpse"
+    )
 
 
 def test_looking_settings_are_checked_with_one_line_errors(env):
@@ -604,3 +607,24 @@ def test_with_no_other_frontier_left_the_edge_beside_guessed_obstacles_is_one():
     south[139:142, 60:76] = False
     goals = goals_at(inferred, south)
     assert goals.frontiers and all(f.center[0] > 130 for f in goals.frontiers)
+
+
+class _WholeFrames(BuiltinSimulator):
+    """The built-in simulator handing over every frame whole, as a backend of arrays would."""
+
+    def _observe(self, collided: bool):
+        obs = super()._observe(collided)
+        return dataclasses.replace(obs, frame=CameraFrame.of(obs.rgb, obs.depth, obs.semantic))
+
+
+def test_an_episode_on_frames_made_as_read_equals_the_episode_on_whole_frames(tiny_scene):
+    """At a size the mapper strides (240x320 -> 120x160) the agent and the task read only some pixels
+    of each frame; the episode must be the one whole frames give, step for step."""
+    cfg = dataclasses.replace(SimConfig().with_frame(240, 320), max_steps=120)
+    runs = []
+    for sim in (BuiltinSimulator(tiny_scene, cfg), _WholeFrames(tiny_scene, cfg)):
+        result, events = _run(sim, _agent(sim), _episode())
+        runs.append(
+            ([(e.action, e.pose) for e, _ in events], {k: v for k, v in result.to_json().items() if k != "seconds"})
+        )
+    assert runs[0] == runs[1]

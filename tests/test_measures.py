@@ -116,11 +116,8 @@ def test_the_target_is_confirmed_by_the_frames_once_enough_of_it_was_seen_up_clo
 
 
 def _frame(env: BuiltinSimulator, pose: Pose, tilt: float = 0.0) -> Observation:
-    rendered = env.renderer.render(pose, tilt)
     return Observation(
-        rgb=rendered.rgb,
-        depth=rendered.depth,
-        semantic=rendered.semantic,
+        frame=env.renderer.render(pose, tilt),
         pose=pose,
         tilt=tilt,
         goal="toilet",

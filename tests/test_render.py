@@ -11,6 +11,7 @@ from test_world import two_rooms
 
 from l3mvn.core.config import SimConfig
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.frames import centre_pixels
 from l3mvn.core.types import Pose
 from l3mvn.run.viz import category_palette, colorize_depth, colorize_semantic, legend, side_by_side
 from l3mvn.world.sim.render import Renderer
@@ -107,6 +108,52 @@ def test_frames_match_embree_ray_casting_pixel_for_pixel(renderer):
         semantic = np.where(ids < world.num_triangles, world.tri_category[np.minimum(ids, world.num_triangles - 1)], 0)
         assert np.mean(np.abs(depth - frame.depth) < 1e-3) > 0.999
         assert np.mean(semantic == frame.semantic) > 0.999
+
+
+# Poses that see both rooms' objects near and far, looking level, down and up.
+VIEWS = (
+    (at(35, 20, -1.2), -0.5),
+    (at(44, 70, 2.0), 0.5),
+    (at(30, 8, 0.1), 0.0),
+    (at(45, 30, math.pi), math.radians(-30)),
+    (at(35, 20, -math.pi / 2), math.radians(-30)),
+)
+
+
+@pytest.mark.parametrize("size", [(480, 640), (121, 161), (60, 80)])
+def test_strided_pixels_rendered_alone_equal_those_of_the_whole_frame(renderer, size):
+    """The mapper's pixels are rasterised alone, with the whole frame's arithmetic: same values."""
+    for pose, tilt in VIEWS:
+        whole = renderer.render(pose, tilt, *size)
+        for step in (2, 3, 4):
+            lone = renderer.frame(pose, tilt, *size)
+            depth, semantic = lone.strided(step)
+            assert np.array_equal(depth, centre_pixels(whole.depth, step))
+            assert np.array_equal(semantic, centre_pixels(whole.semantic, step))
+            assert lone.strided(step)[0] is depth  # made once
+
+
+def test_category_counts_without_the_whole_frame_equal_the_whole_frames(renderer):
+    """Counting one category rasterises only the box its triangles cover, as the whole frame does."""
+    labels = range(0, len(two_rooms().categories) + 2)  # background and an absent id included
+    for size in ((480, 640), ODD):
+        for pose, tilt in VIEWS:
+            whole = renderer.render(pose, tilt, *size)
+            for label in labels:
+                expected = int(np.count_nonzero((whole.semantic == label) & (whole.depth > 0)))
+                assert renderer.frame(pose, tilt, *size).count(label) == expected
+                assert whole.count(label) == expected
+
+
+def test_a_frame_renders_only_what_is_read_and_reports_the_time(renderer):
+    frame = renderer.frame(at(30, 8, 0.1), 0.0, 480, 640)
+    frame.strided(4)
+    assert frame.take_render_seconds() > 0.0
+    assert frame.take_render_seconds() == 0.0  # claimed once
+    rgb = frame.rgb  # the colours need the whole frame: made now, then kept
+    assert rgb.shape == (480, 640, 3) and frame.rgb is rgb
+    assert np.array_equal(frame.depth, renderer.render(at(30, 8, 0.1), 0.0, 480, 640).depth)
+    assert frame.take_render_seconds() > 0.0
 
 
 def test_bad_tilt_or_frame_size_is_rejected(renderer):

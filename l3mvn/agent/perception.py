@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from l3mvn.agent.mapping import SemanticMap, SemanticMapper
-from l3mvn.core.camera import CameraIntrinsics, downsample_frame
+from l3mvn.core.camera import CameraIntrinsics
 from l3mvn.core.config import Config
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.frames import CameraFrame
 from l3mvn.core.types import Pose
 
 
@@ -93,13 +94,11 @@ class Perception:
             raise L3MVNError("perception has mapped no frame of this episode yet")
         return self._mapper.map
 
-    def update(self, depth: np.ndarray, semantic: np.ndarray, pose: Pose, tilt: float) -> SemanticMap:
-        """Map one frame (full-size depth in metres and semantic ids) seen from ``pose`` at ``tilt``."""
+    def update(self, frame: CameraFrame, pose: Pose, tilt: float) -> SemanticMap:
+        """Map one camera frame seen from ``pose`` at ``tilt`` (only its strided pixels are read)."""
         if self._start is None:
             raise L3MVNError("perception has no start pose: call reset(start, seed) first")
-        factor = self.config.agent.downsample_factor(*depth.shape)
-        if factor != 1:
-            depth, semantic = downsample_frame(depth, semantic, factor)
+        depth, semantic = frame.strided(self.config.agent.downsample_factor(*frame.shape))
         semantic = self.noise(semantic)
         mapper = self._mapper
         if mapper is None or (mapper.intrinsics.height, mapper.intrinsics.width) != depth.shape:

@@ -17,6 +17,7 @@ import numpy as np
 
 from l3mvn.core.config import SimConfig
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.frames import centre_pixels
 from l3mvn.core.types import Pose
 
 
@@ -151,10 +152,7 @@ def downsample_frame(
     h, w = depth.shape[:2]
     if h % factor or w % factor:
         raise L3MVNError(f"frame {h}x{w} is not divisible by the downsample factor {factor}")
-    start = factor // 2
-    small_depth = depth[start::factor, start::factor]
-    small_sem = None if semantic is None else semantic[start::factor, start::factor]
-    return small_depth, small_sem
+    return centre_pixels(depth, factor), None if semantic is None else centre_pixels(semantic, factor)
 
 
 def _check_frame(depth: np.ndarray, semantic: np.ndarray | None, intrinsics: CameraIntrinsics) -> None:

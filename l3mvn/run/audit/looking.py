@@ -86,7 +86,7 @@ class Looker:
                 tilt = math.radians(tilt_deg)
                 frame = self.renderer.render(pose, tilt)
                 pixels = self._pixels(frame.depth, frame.semantic, target, pose, tilt)
-                sem_map = self.perception.update(frame.depth, frame.semantic, pose, tilt)
+                sem_map = self.perception.update(frame, pose, tilt)
                 mapped, ok = self._confirm(sem_map, target, r, c)
                 if out.view is None or pixels > out.pixels:
                     out.pixels, out.rgb = pixels, frame.rgb

@@ -31,6 +31,7 @@ import numpy as np
 
 from l3mvn.core.config import SimConfig
 from l3mvn.core.errors import L3MVNError, one_line
+from l3mvn.core.frames import CameraFrame
 from l3mvn.core.types import Action, Observation, Pose
 from l3mvn.world.episode import Episode
 from l3mvn.world.scenes.categories import RAW_NAMES
@@ -308,9 +309,7 @@ class BridgeEnvironment(EpisodeState):
         self._pose = self.scene.pose_from_habitat(reply["position"], reply["rotation"])
         assert self._episode is not None
         return Observation(
-            rgb=arrays["rgb"],
-            depth=arrays["depth"],
-            semantic=arrays["semantic"],
+            frame=CameraFrame.of(arrays["rgb"], arrays["depth"], arrays["semantic"]),
             pose=self._pose,
             tilt=math.radians(float(reply["tilt_deg"])),
             goal=self._episode.goal,

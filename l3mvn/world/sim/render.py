@@ -9,18 +9,23 @@ few thousand boundary quads of a floor costs a fraction of that. It runs on one 
 shares the two cores, and numba's thread pool degrades badly when they are oversubscribed.
 Shading is one fused pass: a precomputed shaded colour per triangle, a floor checker from the hit
 point, mild distance fog.
+
+A frame is made as far as it is read (``l3mvn.core.frames``): the pixels an agent maps (the centre
+of every k x k block) are rasterised alone, with the very arithmetic of the whole frame (pixel
+centres, spans, the depth plane), so they hold the same values as the whole frame's; the whole
+depth and semantic images, and the colour image after them, are made on first read.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
 
 from l3mvn.core.config import SimConfig
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.frames import CameraFrame
 from l3mvn.core.types import Pose
 from l3mvn.world.sim.world import World
 
@@ -35,15 +40,6 @@ _FOG_RANGE_M = 12.0
 _TILE_M = 0.5  # floor checker: a metric cue for how far the floor runs
 _TILE_DARK = 0.86
 _NEAR_M = 0.01
-
-
-@dataclass(frozen=True)
-class Frame:
-    """rgb uint8 (H, W, 3); depth float32 metres (H, W), 0 where invalid; semantic int32 (H, W)."""
-
-    rgb: np.ndarray
-    depth: np.ndarray
-    semantic: np.ndarray
 
 
 class Renderer:
@@ -64,37 +60,70 @@ class Renderer:
         z = world.vertices[world.triangles][:, :, 2]
         self._floor = np.zeros(m + 1, np.bool_)
         self._floor[:m] = (world.tri_normal[:, 2] > 0.5) & (np.abs(z).max(axis=1) < 1e-6)
+        self._by_category = {
+            int(c): np.ascontiguousarray(self._triangles[world.tri_category == c])
+            for c in np.unique(world.tri_category)
+        }
 
-    def render(self, pose: Pose, tilt: float, height: int | None = None, width: int | None = None) -> Frame:
+    def render(self, pose: Pose, tilt: float, height: int | None = None, width: int | None = None) -> CameraFrame:
+        """The whole frame, every image made."""
+        frame = self.frame(pose, tilt, height, width)
+        frame.rgb  # noqa: B018 - made now: the caller wants the whole frame
+        return frame
+
+    def frame(self, pose: Pose, tilt: float, height: int | None = None, width: int | None = None) -> CameraFrame:
+        """The frame from ``pose`` at ``tilt``, its images made when first read."""
         h = self.cfg.frame_height if height is None else int(height)
         w = self.cfg.frame_width if width is None else int(width)
         if h <= 0 or w <= 0:
             raise L3MVNError(f"frame size must be positive, got {h}x{w}")
         if not math.isfinite(tilt) or abs(tilt) >= math.pi / 2:
             raise L3MVNError(f"tilt must be a finite angle in (-pi/2, pi/2) radians, got {tilt}")
-        focal = (w / 2.0) / math.tan(math.radians(self.cfg.hfov_deg) / 2.0)
+        return RenderedFrame(self, pose, tilt, (h, w))
+
+    def _camera(self, pose: Pose, tilt: float, width: int) -> tuple[np.ndarray, np.ndarray, float]:
+        focal = (width / 2.0) / math.tan(math.radians(self.cfg.hfov_deg) / 2.0)
         origin = np.array([pose.x, pose.y, self.cfg.camera_height_m], np.float64)
-        basis = camera_basis(pose.heading, tilt)
-        ids = np.empty((h, w), np.int32)
-        depth = np.empty((h, w), np.float32)
-        _rasterise(self._vertices, self._triangles, origin, basis, focal, _NEAR_M, ids, depth)
-        rgb = np.empty((h, w, 3), np.uint8)
-        semantic = np.empty((h, w), np.int32)
-        _shade(
-            ids,
-            depth,
-            origin,
-            basis,
-            focal,
-            self._color,
-            self._category,
-            self._floor,
-            self.cfg.min_depth_m,
-            self.cfg.max_depth_m,
-            rgb,
-            semantic,
+        return origin, camera_basis(pose.heading, tilt), focal
+
+    def _sampled(
+        self, pose: Pose, tilt: float, shape: tuple[int, int], corner: tuple[int, int], step: int, size: tuple[int, int]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(triangle ids, z-depth, depth, semantic) of ``size`` pixels of a frame of ``shape``: rows
+        corner[0] + i * step, columns corner[1] + j * step."""
+        origin, basis, focal = self._camera(pose, tilt, shape[1])
+        ids = np.empty(size, np.int32)
+        z = np.empty(size, np.float32)
+        _rasterise(
+            self._vertices, self._triangles, origin, basis, focal, _NEAR_M, *shape, corner[0], corner[1], step, ids, z
         )
-        return Frame(rgb=rgb, depth=depth, semantic=semantic)
+        depth = np.empty(size, np.float32)
+        semantic = np.empty(size, np.int32)
+        _label(ids, z, self._category, self.cfg.min_depth_m, self.cfg.max_depth_m, depth, semantic)
+        return ids, z, depth, semantic
+
+    def _shaded(self, pose: Pose, tilt: float, ids: np.ndarray, z: np.ndarray) -> np.ndarray:
+        origin, basis, focal = self._camera(pose, tilt, ids.shape[1])
+        rgb = np.empty((*ids.shape, 3), np.uint8)
+        _shade(ids, z, origin, basis, focal, self._color, self._floor, rgb)
+        return rgb
+
+    def count(self, pose: Pose, tilt: float, shape: tuple[int, int], label: int) -> int:
+        """Pixels of the frame that show category ``label`` with valid depth. Only the box on screen
+        of that category's triangles within the depth range is rasterised (every pixel showing one of
+        them lies in it), as the whole frame would rasterise it."""
+        triangles = self._by_category.get(label)
+        if triangles is None:
+            return 0
+        origin, basis, focal = self._camera(pose, tilt, shape[1])
+        box = np.empty(4, np.int64)
+        if not _screen_box(
+            self._vertices, triangles, origin, basis, focal, _NEAR_M, shape[0], shape[1], self.cfg.max_depth_m, box
+        ):
+            return 0
+        r0, r1, c0, c1 = (int(v) for v in box)
+        _, _, depth, semantic = self._sampled(pose, tilt, shape, (r0, c0), 1, (r1 - r0 + 1, c1 - c0 + 1))
+        return int(np.count_nonzero((semantic == label) & (depth > 0)))
 
     def ray_directions(self, height: int, width: int, pose: Pose, tilt: float) -> np.ndarray:
         """(H, W, 3) world ray directions with unit length along the optical axis (hit t = z-depth)."""
@@ -111,11 +140,73 @@ def camera_basis(heading: float, tilt: float) -> np.ndarray:
     return np.array([[ct * ch, ct * sh, st], [sh, -ch, 0.0], [-st * ch, -st * sh, ct]], np.float64)
 
 
+class RenderedFrame(CameraFrame):
+    """A frame of the built-in renderer: strided pixels alone, the whole images on first read."""
+
+    def __init__(self, renderer: Renderer, pose: Pose, tilt: float, shape: tuple[int, int]) -> None:
+        super().__init__(shape)
+        self._renderer, self._pose, self._tilt = renderer, pose, tilt
+        self._ids: np.ndarray | None = None
+        self._z: np.ndarray | None = None
+
+    def _make_full(self) -> tuple[np.ndarray, np.ndarray]:
+        self._ids, self._z, depth, semantic = self._renderer._sampled(
+            self._pose, self._tilt, self.shape, (0, 0), 1, self.shape
+        )
+        return depth, semantic
+
+    def _make_rgb(self) -> np.ndarray:
+        self.depth  # noqa: B018 - the colours shade the whole frame's triangles and depths
+        assert self._ids is not None and self._z is not None
+        return self._renderer._shaded(self._pose, self._tilt, self._ids, self._z)
+
+    def _make_strided(self, step: int) -> tuple[np.ndarray, np.ndarray]:
+        start = step // 2
+        size = (len(range(start, self.shape[0], step)), len(range(start, self.shape[1], step)))
+        _, _, depth, semantic = self._renderer._sampled(self._pose, self._tilt, self.shape, (start, start), step, size)
+        return depth, semantic
+
+    def _make_count(self, label: int) -> int:
+        return self._renderer.count(self._pose, self._tilt, self.shape, label)
+
+
 @nb.njit(cache=True)
-def _rasterise(vertices, triangles, origin, basis, focal, near, ids, depth):
-    """Fill ``ids`` (triangle index, or len(triangles) for none) and ``depth`` (z, inf for none)."""
-    h, w = ids.shape
-    m = triangles.shape[0]
+def _project(cam, triangles, t, near, focal, cx, cy, poly):
+    """Clip triangle ``t`` (camera coordinates ``cam``) at the near plane and project it into
+    ``poly``: (vertex count, xmin, xmax, ymin, ymax, nearest forward distance)."""
+    n = 0
+    xmin, xmax, ymin, ymax, fmin = 1e30, -1e30, 1e30, -1e30, 1e30
+    for e in range(3):
+        a = triangles[t, e]
+        b = triangles[t, (e + 1) % 3]
+        a_in = cam[a, 0] >= near
+        for k in range(2):
+            if k == 0:
+                if not a_in:
+                    continue
+                pf, pr, pu = cam[a, 0], cam[a, 1], cam[a, 2]
+            else:
+                if a_in == (cam[b, 0] >= near):
+                    continue
+                s = (near - cam[a, 0]) / (cam[b, 0] - cam[a, 0])
+                pf = near
+                pr = cam[a, 1] + s * (cam[b, 1] - cam[a, 1])
+                pu = cam[a, 2] + s * (cam[b, 2] - cam[a, 2])
+            sx = cx + focal * pr / pf
+            sy = cy - focal * pu / pf
+            poly[n, 0] = sx
+            poly[n, 1] = sy
+            xmin = min(xmin, sx)
+            xmax = max(xmax, sx)
+            ymin = min(ymin, sy)
+            ymax = max(ymax, sy)
+            fmin = min(fmin, pf)
+            n += 1
+    return n, xmin, xmax, ymin, ymax, fmin
+
+
+@nb.njit(cache=True)
+def _to_camera(vertices, origin, basis):
     nv = vertices.shape[0]
     cam = np.empty((nv, 3))
     for i in range(nv):
@@ -124,6 +215,16 @@ def _rasterise(vertices, triangles, origin, basis, focal, near, ids, depth):
         dz = vertices[i, 2] - origin[2]
         for k in range(3):
             cam[i, k] = basis[k, 0] * dx + basis[k, 1] * dy + basis[k, 2] * dz
+    return cam
+
+
+@nb.njit(cache=True)
+def _rasterise(vertices, triangles, origin, basis, focal, near, h, w, row0, col0, step, ids, depth):
+    """Fill ``ids`` (triangle index, or len(triangles) for none) and ``depth`` (z, inf for none) at
+    the pixels (row0 + i * step, col0 + j * step) of an h x w frame."""
+    out_h, out_w = ids.shape
+    m = triangles.shape[0]
+    cam = _to_camera(vertices, origin, basis)
     cx, cy = w / 2.0, h / 2.0
     # Per triangle: clipped, projected polygon (<= 4 vertices) and its inverse-depth plane.
     poly = np.empty((m, 4, 2))
@@ -131,33 +232,7 @@ def _rasterise(vertices, triangles, origin, basis, focal, near, ids, depth):
     plane = np.empty((m, 3))
     rows = np.empty((m, 2), np.int32)
     for t in range(m):
-        n = 0
-        xmin, xmax, ymin, ymax = 1e30, -1e30, 1e30, -1e30
-        for e in range(3):
-            a = triangles[t, e]
-            b = triangles[t, (e + 1) % 3]
-            a_in = cam[a, 0] >= near
-            for k in range(2):
-                if k == 0:
-                    if not a_in:
-                        continue
-                    pf, pr, pu = cam[a, 0], cam[a, 1], cam[a, 2]
-                else:
-                    if a_in == (cam[b, 0] >= near):
-                        continue
-                    s = (near - cam[a, 0]) / (cam[b, 0] - cam[a, 0])
-                    pf = near
-                    pr = cam[a, 1] + s * (cam[b, 1] - cam[a, 1])
-                    pu = cam[a, 2] + s * (cam[b, 2] - cam[a, 2])
-                sx = cx + focal * pr / pf
-                sy = cy - focal * pu / pf
-                poly[t, n, 0] = sx
-                poly[t, n, 1] = sy
-                xmin = min(xmin, sx)
-                xmax = max(xmax, sx)
-                ymin = min(ymin, sy)
-                ymax = max(ymax, sy)
-                n += 1
+        n, xmin, xmax, ymin, ymax, _ = _project(cam, triangles, t, near, focal, cx, cy, poly[t])
         if n < 3 or xmax < 0.5 or xmin > w - 0.5 or ymax < 0.5 or ymin > h - 0.5:
             continue  # behind the camera or off screen
         i0, i1, i2 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
@@ -171,6 +246,9 @@ def _rasterise(vertices, triangles, origin, basis, focal, near, ids, depth):
             continue  # the plane passes through the camera: seen edge-on
         r0 = max(0, int(math.ceil(ymin - 0.5)))
         r1 = min(h - 1, int(math.floor(ymax - 0.5)))
+        # ... as sampled rows: row0 + k * step for k in [r0, r1]
+        r0 = max(0, -((row0 - r0) // step))
+        r1 = min(out_h - 1, (r1 - row0) // step)
         if r0 > r1:
             continue
         # 1/z = (nf + nr * u + nu * v) / c with u = (sx - cx) / f, v = (cy - sy) / f.
@@ -180,14 +258,20 @@ def _rasterise(vertices, triangles, origin, basis, focal, near, ids, depth):
         rows[t, 0] = r0
         rows[t, 1] = r1
         count[t] = n
-    invz = np.zeros((h, w))
+    # Sampled columns from a column span [j0, j1]: first_col[j0] .. last_col[j1].
+    first_col = np.empty(w, np.int64)
+    last_col = np.empty(w, np.int64)
+    for j in range(w):
+        first_col[j] = max(0, -((col0 - j) // step))
+        last_col[j] = min(out_w - 1, (j - col0) // step)
+    invz = np.zeros(ids.shape)
     ids[:, :] = m
     for t in range(m):
         n = count[t]
         if n == 0:
             continue
-        for i in range(rows[t, 0], rows[t, 1] + 1):
-            yc = i + 0.5
+        for row in range(rows[t, 0], rows[t, 1] + 1):
+            yc = row0 + row * step + 0.5
             xl, xr = 1e30, -1e30
             for k in range(n):
                 ax, ay = poly[t, k, 0], poly[t, k, 1]
@@ -199,45 +283,88 @@ def _rasterise(vertices, triangles, origin, basis, focal, near, ids, depth):
             j0 = max(0, int(math.ceil(xl - 0.5 - 1e-7)))
             j1 = min(w - 1, int(math.floor(xr - 0.5 + 1e-7)))
             base = plane[t, 0] + plane[t, 2] * yc
-            step = plane[t, 1]
-            for j in range(j0, j1 + 1):
-                iz = base + step * (j + 0.5)
-                if iz > invz[i, j]:
-                    invz[i, j] = iz
-                    ids[i, j] = t
-    for i in range(h):
-        for j in range(w):
+            slope = plane[t, 1]
+            if j0 > j1:
+                continue
+            c0 = first_col[j0]
+            x = col0 + c0 * step + 0.5  # the pixel centre, exact in floating point
+            for col in range(c0, last_col[j1] + 1):
+                iz = base + slope * x
+                x += step
+                if iz > invz[row, col]:
+                    invz[row, col] = iz
+                    ids[row, col] = t
+    for i in range(ids.shape[0]):
+        for j in range(ids.shape[1]):
             iz = invz[i, j]
             depth[i, j] = 1.0 / iz if iz > 0.0 else np.inf
 
 
 @nb.njit(cache=True)
-def _shade(ids, depth, origin, basis, focal, color, category, floor, dmin, dmax, rgb, semantic):
-    """Per pixel: category, shaded colour with floor checker and fog; depth outside range -> 0."""
+def _label(ids, z, category, dmin, dmax, depth, semantic):
+    """Per pixel: the hit triangle's category, and its depth where the sensor's range keeps it
+    (0 elsewhere, and where nothing was hit)."""
+    h, w = ids.shape
+    for i in range(h):
+        for j in range(w):
+            semantic[i, j] = category[ids[i, j]]
+            d = z[i, j]
+            depth[i, j] = d if math.isfinite(d) and dmin <= d <= dmax else 0.0
+
+
+@nb.njit(cache=True)
+def _shade(ids, z, origin, basis, focal, color, floor, rgb):
+    """Per pixel: shaded colour with floor checker and fog; black where nothing was hit."""
     h, w = ids.shape
     cx, cy = w / 2.0, h / 2.0
     for i in range(h):
         v = (cy - i - 0.5) / focal
         for j in range(w):
             t = ids[i, j]
-            z = depth[i, j]
-            semantic[i, j] = category[t]
-            if not math.isfinite(z):
-                depth[i, j] = 0.0
+            d = z[i, j]
+            if not math.isfinite(d):
                 rgb[i, j, 0] = 0
                 rgb[i, j, 1] = 0
                 rgb[i, j, 2] = 0
                 continue
-            fog = min(z * (_FOG_MAX / _FOG_RANGE_M), _FOG_MAX)
+            fog = min(d * (_FOG_MAX / _FOG_RANGE_M), _FOG_MAX)
             gain = 1.0 - fog
             if floor[t]:
                 u = (j + 0.5 - cx) / focal
-                x = origin[0] + z * (basis[0, 0] + u * basis[1, 0] + v * basis[2, 0])
-                y = origin[1] + z * (basis[0, 1] + u * basis[1, 1] + v * basis[2, 1])
+                x = origin[0] + d * (basis[0, 0] + u * basis[1, 0] + v * basis[2, 0])
+                y = origin[1] + d * (basis[0, 1] + u * basis[1, 1] + v * basis[2, 1])
                 if (math.floor(x / _TILE_M) + math.floor(y / _TILE_M)) % 2 != 0:
                     gain *= _TILE_DARK
             rgb[i, j, 0] = np.uint8(min(color[t, 0] * gain + fog * _FOG_RGB[0], 255.0))
             rgb[i, j, 1] = np.uint8(min(color[t, 1] * gain + fog * _FOG_RGB[1], 255.0))
             rgb[i, j, 2] = np.uint8(min(color[t, 2] * gain + fog * _FOG_RGB[2], 255.0))
-            if z < dmin or z > dmax:
-                depth[i, j] = 0.0
+
+
+@nb.njit(cache=True)
+def _screen_box(vertices, triangles, origin, basis, focal, near, h, w, dmax, box):
+    """Pixel box (first row, last row, first column, last column) into ``box`` holding every pixel
+    that ``triangles`` cover nearer than ``dmax`` (depth over a triangle is least at a vertex of its
+    clipped polygon); False when none is on screen."""
+    cam = _to_camera(vertices, origin, basis)
+    cx, cy = w / 2.0, h / 2.0
+    poly = np.empty((4, 2))
+    found = False
+    for t in range(triangles.shape[0]):
+        n, xmin, xmax, ymin, ymax, fmin = _project(cam, triangles, t, near, focal, cx, cy, poly)
+        if n < 3 or xmax < 0.5 or xmin > w - 0.5 or ymax < 0.5 or ymin > h - 0.5:
+            continue
+        if fmin > dmax * (1.0 + 1e-6) + 1e-6:
+            continue
+        r0 = max(0, int(math.ceil(ymin - 0.5)))
+        r1 = min(h - 1, int(math.floor(ymax - 0.5)))
+        c0 = max(0, int(math.ceil(xmin - 0.5 - 1e-7)))
+        c1 = min(w - 1, int(math.floor(xmax - 0.5 + 1e-7)))
+        if r0 > r1 or c0 > c1:
+            continue
+        if not found:
+            box[0], box[1], box[2], box[3] = r0, r1, c0, c1
+            found = True
+        else:
+            box[0], box[1] = min(box[0], r0), max(box[1], r1)
+            box[2], box[3] = min(box[2], c0), max(box[3], c1)
+    return found

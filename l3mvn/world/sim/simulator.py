@@ -112,11 +112,8 @@ class BuiltinSimulator(EpisodeState):
 
     def _observe(self, collided: bool) -> Observation:
         assert self._pose is not None and self._episode is not None
-        frame = self.renderer.render(self._pose, self._tilt)
         return Observation(
-            rgb=frame.rgb,
-            depth=frame.depth,
-            semantic=frame.semantic,
+            frame=self.renderer.frame(self._pose, self._tilt),
             pose=self._pose,
             tilt=self._tilt,
             goal=self._episode.goal,

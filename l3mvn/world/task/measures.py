@@ -11,8 +11,6 @@ from __future__ import annotations
 
 from collections import deque
 
-import numpy as np
-
 from l3mvn.core.types import Action, Observation
 from l3mvn.world.episode import Episode
 from l3mvn.world.sim.base import Environment
@@ -23,8 +21,8 @@ from l3mvn.world.task.views import ViewRecord
 
 def target_visible(obs: Observation, seen_fraction: float) -> bool:
     """Whether at least ``seen_fraction`` of the frame shows the goal with valid depth."""
-    visible = np.count_nonzero((obs.semantic == obs.goal_id) & (obs.depth > 0))
-    return bool(visible >= seen_fraction * obs.semantic.size)
+    h, w = obs.frame.shape
+    return obs.frame.count(obs.goal_id) >= seen_fraction * h * w
 
 
 class EpisodeMeasures:

@@ -49,9 +49,7 @@ class ViewRecord:
 
     def add(self, obs: Observation, pose: Pose) -> None:
         """Record the frame ``obs`` taken from the true ``pose``."""
-        stride = max(1, math.ceil(obs.depth.shape[0] / self.config.task.view_rows))
-        depth = obs.depth[stride // 2 :: stride, stride // 2 :: stride]
-        semantic = obs.semantic[stride // 2 :: stride, stride // 2 :: stride]
+        depth, semantic = obs.frame.strided(max(1, math.ceil(obs.frame.shape[0] / self.config.task.view_rows)))
         intrinsics = self._intrinsics
         if intrinsics is None or (intrinsics.height, intrinsics.width) != depth.shape:
             intrinsics = self._intrinsics = CameraIntrinsics.from_sim(self.config.sim, *depth.shape)
