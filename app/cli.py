@@ -8,6 +8,8 @@ import time
 
 from l3mvn.core.errors import L3MVNError, one_line
 
+REPORT_HELP = "one self-contained HTML page over eval result files: tables with intervals, charts, videos"
+
 
 def _typed(kind: type, flag: str):
     """An argparse type reading ``flag`` as ``--set`` reads numbers (ASCII digits, finite)."""
@@ -174,13 +176,12 @@ def main(argv: list[str] | None = None) -> int:
     """The installed ``l3mvn`` script: the library's commands and the dashboard's ``serve``."""
     from l3mvn.run.cli import Command
     from l3mvn.run.cli import main as l3mvn_main
-    from l3mvn_studio import report
 
     return l3mvn_main(
         argv,
         extra={
             "serve": Command("the live web dashboard (viser)", add_arguments, run),
-            "report": Command(report.HELP, report.add_report_arguments, report.run_report),
+            "report": Command.lazy(REPORT_HELP, "l3mvn_studio.report", "add_report_arguments", "run_report"),
         },
     )
 

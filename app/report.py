@@ -20,8 +20,6 @@ from l3mvn_studio.report_data import read_report_data
 from l3mvn_studio.report_page import render_page
 from l3mvn_studio.report_videos import MAX_VIDEOS, choose_videos
 
-HELP = "one self-contained HTML page over eval result files: tables with intervals, charts, videos"
-
 
 @dataclass(frozen=True)
 class WrittenReport:

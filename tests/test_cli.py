@@ -237,3 +237,22 @@ def test_config_lists_every_field_and_refuses_a_mistyped_one(capsys):
     assert main(["config", "--set", "agent.replan_evry=5"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: unknown setting 'replan_evry' in section agent; valid:") and "\n" not in err
+
+
+def test_an_eval_imports_no_neural_network_no_recorder_and_no_dashboard(tmp_path):
+    """Torch, rerun and viser take seconds to import; a map-based eval needs none of them (a warm
+    machine runs a one-episode check in about two seconds)."""
+    code = (
+        "import sys\n"
+        "from l3mvn_studio.cli import main\n"
+        "try:\n"
+        "    main(['eval', '--help'])\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        f"main(['eval', '--policy', 'frontier', '--houses', '1', '--episodes', '1', '--frame', '120x160', "
+        f"'--set', 'sim.max_steps=20', '--out', {str(tmp_path / 'r.jsonl')!r}])\n"
+        "print(sorted(m for m in ('torch', 'rerun', 'viser', 'transformers') if m in sys.modules))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "[]"

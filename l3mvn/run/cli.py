@@ -6,6 +6,7 @@ Every user error is one line on stderr (``error: ...``) and exit status 2; no tr
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import math
 import sys
@@ -108,41 +109,63 @@ def _config(args: argparse.Namespace, policy: PolicyConfig | None = None) -> Con
 
 @dataclass(frozen=True)
 class Command:
-    """A subcommand contributed from above the library (the dashboard's ``serve``), so the library
-    never imports the application that uses it."""
+    """A subcommand whose arguments and run live beside what it drives, or above the library (the
+    dashboard's ``serve``), so the library never imports the application that uses it."""
 
     help: str
     add_arguments: Callable[[argparse.ArgumentParser], None]
     run: Callable[[argparse.Namespace], int]
 
+    @classmethod
+    def lazy(cls, help: str, module: str, add_arguments: str, run: str) -> Command:
+        """A command whose module is imported only when it is the command asked for (torch, rerun
+        and the dashboard take seconds to import; ``l3mvn eval`` needs none of them)."""
+
+        def member(name: str) -> Callable:
+            return lambda arg: getattr(importlib.import_module(module), name)(arg)
+
+        return cls(help, member(add_arguments), member(run))
+
 
 def _library_commands() -> dict[str, Command]:
     """Commands whose arguments and run live beside what they drive."""
-    from l3mvn.run.eval import result_videos
-    from l3mvn.run.potentials import train as potentials_train
-    from l3mvn.world.datasets import hm3d_export
-
     return {
-        "export": Command(
+        "export": Command.lazy(
             "write an MP4 (--gif: and a GIF) of a recorded episode, or of the (failed) episodes of a result file",
-            result_videos.add_export_arguments,
-            result_videos.run_export,
+            "l3mvn.run.eval.result_videos",
+            "add_export_arguments",
+            "run_export",
         ),
-        "export-hm3d": Command(
+        "export-hm3d": Command.lazy(
             "export procedural houses as scans in HM3D's layout, with an objectnav_hm3d_v2 "
             "episode file (to run them here and on habitat-sim)",
-            hm3d_export.add_export_arguments,
-            hm3d_export.run_export,
+            "l3mvn.world.datasets.hm3d_export",
+            "add_export_arguments",
+            "run_export",
         ),
-        "poni": Command(
+        "replay": Command.lazy(
+            "open a rerun recording (.rrd) in the rerun viewer",
+            "l3mvn.run.recording",
+            "add_replay_arguments",
+            "run_replay",
+        ),
+        "poni": Command.lazy(
             "the PONI policy's potential network: train it from full house maps and walks, or show a checkpoint",
-            potentials_train.add_arguments,
-            potentials_train.run,
+            "l3mvn.run.potentials.train",
+            "add_arguments",
+            "run",
         ),
     }
 
 
-def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentParser:
+def _command_in(argv: list[str]) -> str | None:
+    """The subcommand named on the command line (its first word), or None (``--help``, nothing)."""
+    return argv[0] if argv and not argv[0].startswith("-") else None
+
+
+def build_parser(extra: dict[str, Command] | None = None, only: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command; with ``only``, the contributed commands other than that one are
+    listed by name and help without their arguments (building those imports what they drive)."""
     from l3mvn.run.registry import policy_names
 
     parser = argparse.ArgumentParser(prog="l3mvn", description="L3MVN Studio: language-guided ObjectNav")
@@ -305,11 +328,10 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
     gen.add_argument("--min-distance", type=float, default=1.0, help="min geodesic start distance, m")
     gen.add_argument("--max-distance", type=float, default=30.0, help="max geodesic start distance, m")
 
-    from l3mvn.run.recording import add_replay_arguments
-
     for name, command in {**_library_commands(), **(extra or {})}.items():
-        command.add_arguments(sub.add_parser(name, help=command.help))
-    add_replay_arguments(sub.add_parser("replay", help="open a rerun recording (.rrd) in the rerun viewer"))
+        contributed = sub.add_parser(name, help=command.help)
+        if only is None or only == name:
+            command.add_arguments(contributed)
 
     lang = sub.add_parser("language", help="co-occurrence statistics behind the language prior")
     lang_sub = lang.add_subparsers(dest="language_command", required=True)
@@ -324,9 +346,10 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
         help="frontiers an agent chose among on house maps, labelled with "
         "the ground-truth metres to every goal (for train-head)",
     )
-    from l3mvn.run.eval.frontier_data import add_arguments as add_frontier_data_arguments
+    if only in (None, "language"):
+        from l3mvn.run.eval.frontier_data import add_arguments as add_frontier_data_arguments
 
-    add_frontier_data_arguments(fd)
+        add_frontier_data_arguments(fd)
     th = sub.add_parser("train-head", help="train the feed-forward language head (split by house or building)")
     th.add_argument(
         "--head",
@@ -367,7 +390,8 @@ def build_parser(extra: dict[str, Command] | None = None) -> argparse.ArgumentPa
 
 def main(argv: list[str] | None = None, extra: dict[str, Command] | None = None) -> int:
     """``l3mvn``: the library's commands plus ``extra`` ones (the installed script adds ``serve``)."""
-    parser = build_parser(extra)
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser(extra, only=_command_in(argv))
     args = parser.parse_args(argv)
     try:
         commands = {**_library_commands(), **(extra or {})}
@@ -390,10 +414,6 @@ def main(argv: list[str] | None = None, extra: dict[str, Command] | None = None)
             return _cmd_render(args)
         if args.command == "config":
             return _cmd_config(args)
-        if args.command == "replay":
-            from l3mvn.run.recording import run_replay
-
-            return run_replay(args)
         if args.command == "language":
             return _cmd_language(args)
         if args.command == "train-head":

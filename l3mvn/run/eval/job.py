@@ -22,7 +22,6 @@ from pathlib import Path
 from l3mvn.core.config import Config, config_dict, config_hash
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.events import EventBus, StepEvent
-from l3mvn.run.recording import Recorder
 from l3mvn.run.registry import check_options, check_policy, check_ready, with_scorer
 from l3mvn.run.runner import Runner
 from l3mvn.world.datasets import EpisodeSet, load_episode_set
@@ -169,6 +168,8 @@ class _JobState:
         bus.subscribe(stages)
         recorder, unrecorded = None, None
         if self.job.record_dir is not None:
+            from l3mvn.run.recording import Recorder  # rerun loads in ~0.4 s: only for runs that record
+
             try:
                 recorder = Recorder.for_episode(
                     self.job.record_dir, self.episodes.name, episode, self.job.policy, record_tag
