@@ -15,6 +15,7 @@ import numpy as np
 
 from l3mvn.agent.mapping import SemanticMap
 from l3mvn.agent.planning import LocalPlanner
+from l3mvn.agent.planning.goal_field import mask_cells
 from l3mvn.core.types import Action, wrap_angle
 
 Cell = tuple[int, int]
@@ -146,5 +147,5 @@ def distance_to(mask: np.ndarray, limit_cells: float) -> np.ndarray:
 
 
 def mask_centre(mask: np.ndarray) -> Cell:
-    rows, cols = np.nonzero(mask)
+    rows, cols = mask_cells(mask)  # within its bounding box: a whole-map nonzero costs ~0.2 ms
     return int(np.median(rows)), int(np.median(cols))
