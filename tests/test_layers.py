@@ -28,6 +28,7 @@ SIDES: dict[str, set[str]] = {
 LAYERS: dict[str, list[set[str]]] = {
     "core": [
         {"errors"},
+        {"frames"},
         {"types", "config", "grid", "paths", "writing", "categories", "json_values", "plugins"},
         {"camera"},
     ],
