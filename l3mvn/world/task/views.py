@@ -62,7 +62,8 @@ class ViewRecord:
         self._mark(self.seen_floor, points[floor])
         self._mark(self.seen_floor, _up_to_first_surface(points, valid, floor, pose, self.scene.resolution_m / 2))
         pairs = floor[:-1] & floor[1:]  # vertically neighbouring pixels that both met the floor
-        self._mark(self.seen_floor, _between(points[:-1][pairs], points[1:][pairs], self.scene.resolution_m / 2))
+        flat = points[..., :2]  # the marks are cells of the floor plane
+        self._mark(self.seen_floor, _between(flat[:-1][pairs], flat[1:][pairs], self.scene.resolution_m / 2))
         self._mark_body(pose)
         if obs.goal in obs.categories:
             self._mark(self.goal_seen, points[valid & (semantic == obs.goal_id)])
@@ -98,8 +99,8 @@ class ViewRecord:
 def _up_to_first_surface(
     points: np.ndarray, valid: np.ndarray, floor: np.ndarray, pose: Pose, spacing_m: float
 ) -> np.ndarray:
-    """Points every ``spacing_m`` from the agent along each pixel column, up to the nearest point of
-    the column that is not floor, or (none) to its farthest floor point."""
+    """Floor points (x, y) every ``spacing_m`` from the agent along each pixel column, up to the
+    nearest point of the column that is not floor, or (none) to its farthest floor point."""
     reach = np.hypot(points[..., 0] - pose.x, points[..., 1] - pose.y)
     wall = np.where(valid & ~floor, reach, np.inf)
     far = np.where(floor, reach, -1.0)
@@ -107,21 +108,20 @@ def _up_to_first_surface(
     row = np.where(has_wall, wall.argmin(axis=0), far.argmax(axis=0))  # the point that ends the column
     columns = np.flatnonzero(has_wall | floor.any(axis=0))
     if not len(columns):
-        return np.empty((0, 3), np.float32)
-    end = points[row[columns], columns].copy()
-    end[:, 2] = 0.0
-    start = np.zeros_like(end)
+        return np.empty((0, 2), np.float32)
+    end = points[row[columns], columns, :2]
+    start = np.empty_like(end)
     start[:, 0], start[:, 1] = pose.x, pose.y
     return np.concatenate([start, _between(start, end, spacing_m)])
 
 
 def _between(a: np.ndarray, b: np.ndarray, spacing_m: float) -> np.ndarray:
-    """Points every ``spacing_m`` along each segment a[i] -> b[i] (N, 3), endpoints excluded: only the
-    segments longer than the spacing need any."""
+    """Points (x, y) every ``spacing_m`` along each segment a[i] -> b[i] of the floor plane (a and b:
+    (N, 2) x, y), endpoints excluded: only the segments longer than the spacing need any."""
     length = np.hypot(b[:, 0] - a[:, 0], b[:, 1] - a[:, 1])
     long = length > spacing_m
     if not long.any():
-        return np.empty((0, 3), np.float32)
+        return np.empty((0, 2), np.float32)
     a, b, length = a[long], b[long], length[long]
     count = np.ceil(length / spacing_m).astype(np.int64)
     seg = np.repeat(np.arange(len(a)), count - 1)
