@@ -2,6 +2,11 @@
 
     python bench/bench_render.py [--dataset ../shared/data/gibson_semexp --split train] [--frames 50]
 
+Per frame size: the whole frame (colour, depth and semantic images), and the pixels the mapper reads
+(the centre of every k x k block, k = AgentConfig.downsample_factor), which is what an episode renders
+unless something reads the whole frame. Env steps: BuiltinSimulator.step under random movement
+actions, reading the mapper's pixels of every frame.
+
 Without the dataset it benchmarks a synthetic six-room house drawn below, so it always runs.
 """
 
@@ -16,7 +21,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from l3mvn.core.categories import GIBSON_CATEGORIES
-from l3mvn.core.config import SimConfig
+from l3mvn.core.config import AgentConfig, SimConfig
 from l3mvn.core.grid import disk
 from l3mvn.core.types import Action, Pose
 from l3mvn.world.episode import Episode
@@ -86,7 +91,8 @@ def bench_scene(scene: SceneMap, cfg: SimConfig, frames: int, rng: np.random.Gen
         "build_s": build_s,
     }
     for h, w in SIZES:
-        times = []
+        step = AgentConfig().downsample_factor(h, w)
+        whole, read = [], []
         for _ in range(frames):
             r, c = cells[rng.integers(len(cells))]
             x, y = scene.cell_center(int(r), int(c))
@@ -94,15 +100,21 @@ def bench_scene(scene: SceneMap, cfg: SimConfig, frames: int, rng: np.random.Gen
             tilt = math.radians(float(rng.choice([-30.0, 0.0, 30.0])))
             t = time.perf_counter()
             renderer.render(pose, tilt, h, w)
-            times.append((time.perf_counter() - t) * 1e3)
-        row[f"{h}x{w}"] = (float(np.median(times)), float(np.percentile(times, 90)))
+            whole.append((time.perf_counter() - t) * 1e3)
+            t = time.perf_counter()
+            renderer.frame(pose, tilt, h, w).strided(step)
+            read.append((time.perf_counter() - t) * 1e3)
+        row[f"{h}x{w}"] = (float(np.median(whole)), float(np.percentile(whole, 90)))
+        row[f"read {h}x{w}"] = (float(np.median(read)), float(np.percentile(read, 90)))
         row[f"steps {h}x{w}"] = env_steps_per_second(scene, cfg.with_frame(h, w), frames * 4, rng)
     return row
 
 
 def env_steps_per_second(scene: SceneMap, cfg: SimConfig, steps: int, rng: np.random.Generator) -> float:
-    """Simulator steps per second under uniformly random movement actions (render included)."""
+    """Simulator steps per second under uniformly random movement actions, the mapper's pixels of
+    every frame rendered."""
     env = BuiltinSimulator(scene, cfg)
+    factor = AgentConfig().downsample_factor(cfg.frame_height, cfg.frame_width)
     goal = scene.present_goals()[0]
     cells = np.argwhere(scene.navigable)
     r, c = cells[rng.integers(len(cells))]
@@ -113,7 +125,7 @@ def env_steps_per_second(scene: SceneMap, cfg: SimConfig, steps: int, rng: np.ra
     for i in range(steps):
         if env.done:
             env.reset(Episode(i, scene.name, scene.floor, Pose(x, y, 0.0), goal))
-        env.step(moves[int(rng.integers(len(moves)))])
+        env.step(moves[int(rng.integers(len(moves)))]).frame.strided(factor)
     return steps / (time.perf_counter() - t)
 
 
@@ -133,14 +145,16 @@ def main() -> None:
     sizes = [f"{h}x{w}" for h, w in SIZES]
     print(
         "| scene | grid | triangles | build s | "
-        + " | ".join(f"{s} median / p90 ms" for s in sizes)
+        + " | ".join(f"{s} whole median / p90 ms | {s} mapper's pixels median / p90 ms" for s in sizes)
         + " | "
         + " | ".join(f"env steps/s {s}" for s in sizes)
         + " |"
     )
-    print("|---|---|---:|---:|" + "---:|" * (2 * len(sizes)))
+    print("|---|---|---:|---:|" + "---:|" * (3 * len(sizes)))
     for row in rows:
-        cells = " | ".join(f"{row[s][0]:.1f} / {row[s][1]:.1f}" for s in sizes)
+        cells = " | ".join(
+            f"{row[s][0]:.1f} / {row[s][1]:.1f} | {row['read ' + s][0]:.2f} / {row['read ' + s][1]:.2f}" for s in sizes
+        )
         steps = " | ".join(f"{row['steps ' + s]:.0f}" for s in sizes)
         print(f"| {row['scene']} | {row['grid']} | {row['triangles']} | {row['build_s']:.2f} | {cells} | {steps} |")
 

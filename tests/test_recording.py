@@ -14,6 +14,7 @@ from rerun.chunk import RrdReader
 
 from l3mvn.core.config import AgentConfig, Config, SimConfig
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.frames import CameraFrame
 from l3mvn.core.types import Action
 from l3mvn.run.events import EventBus
 from l3mvn.run.recording import (
@@ -269,7 +270,16 @@ def test_a_failing_event_is_counted_not_raised_and_the_file_still_closes(runner,
     recorder = Recorder.for_episode(tmp_path, "tiny", episode, "random-walk").attach(bus)
     first = runner.session(tiny_scene, "random-walk", bus).start(episode)
     broken = dataclasses.replace(
-        first, step=1, observation=dataclasses.replace(first.observation, rgb=np.zeros((2, 3, 4, 5), np.uint8))
+        first,
+        step=1,
+        observation=dataclasses.replace(
+            first.observation,
+            frame=CameraFrame.of(
+                np.zeros((*first.observation.depth.shape, 5), np.uint8),  # no image has five channels
+                first.observation.depth,
+                first.observation.semantic,
+            ),
+        ),
     )
     recorder(broken)  # called directly: the bus would swallow an exception, the recorder must not raise one
     assert recorder.errors == 1
