@@ -48,8 +48,9 @@ class EpisodeMeasures:
         self.entered_region = self.entered_region or self.task.in_success_region(self.env.pose, self.episode.goal)
 
     def _look(self, obs: Observation) -> None:
-        self.saw_target = self.saw_target or target_visible(obs, self.cfg.seen_fraction)
+        # The views first: where they read the whole frame, the count is taken from it, not rendered.
         self.views.add(obs, self.env.pose)
+        self.saw_target = self.saw_target or target_visible(obs, self.cfg.seen_fraction)
 
     @property
     def confirmed(self) -> bool:
