@@ -143,7 +143,13 @@ def _key(view: MapView) -> str:
         return (
             f'<div style="color:{_MUTED};margin-bottom:2px">Bars: the object potential PONI predicts at the '
             "frontier for every goal (1 at the goal, 0 at its range or beyond), the target ringed; metres: "
-            "the distance on to each goal it implies.</div>"
+            "the distance on to each goal it implies"
+            + (
+                f", plus what the {html(view.fusion.words)} words of the frontier's window add"
+                if view.fusion.words
+                else ""
+            )
+            + ".</div>"
         )
     text = (
         "Bars: the scorer's p(goal | frontier) for every goal, the target ringed; S_LLM is the target's "

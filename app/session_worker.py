@@ -26,7 +26,7 @@ import numpy as np
 from l3mvn.agent.modular.teleop import TeleopAgent
 from l3mvn.core.categories import GOAL_CATEGORIES
 from l3mvn.core.config import Config, config_hash
-from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS, HEAD_SCORER
+from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_SCORER, POLICY_HEADS
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.types import Action, Pose, wrap_angle
 from l3mvn.run.events import EventBus, StepEvent
@@ -96,7 +96,7 @@ class DashboardController:
         self.episodes, self.cfg, self.seed = episodes, cfg or Config(), seed
         # A head file the server was started with (--set policy.head=FILE) stays one of the Head choices.
         started = self.cfg.policy.head
-        self._head_files = () if started is None or started in HEAD_KINDS else (started,)
+        self._head_files = () if started is None or started in POLICY_HEADS else (started,)
         self.policy_name = check_policy(policy)
         self.scorer: str | None = None
         self.record = False
@@ -160,7 +160,7 @@ class DashboardController:
     def head_names(self) -> tuple[str, ...]:
         """The Head dropdown's choices: the default first, then every feed-forward head kind, then the
         head file the server was started with, if any."""
-        return (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS + self._head_files
+        return (DEFAULT_HEAD_CHOICE,) + POLICY_HEADS + self._head_files
 
     @property
     def head(self) -> str:

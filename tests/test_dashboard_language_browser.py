@@ -1,6 +1,6 @@
 """The Language folder in a real browser: an l3mvn-zs episode on a procedural house shows per-goal
 bars and the fusion rule line with the numbers of the snapshot; a policy without language says so;
-PONI shows its potentials the same way.
+PONI shows its potentials the same way, and l3mvn-ff with the map head says what the words add.
 
 Skips like tests/test_dashboard_browser.py when playwright or a chromium is missing. Set
 L3MVN_SCREENSHOTS=DIR to keep the screenshot (docs/screenshots/dashboard_language_panel.png).
@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import os
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -34,6 +35,7 @@ pytestmark = pytest.mark.skipif(
 
 from l3mvn.core.config import Config  # noqa: E402
 from l3mvn_studio.language_panel import BAR_PX, SHOWN_FRONTIERS  # noqa: E402
+from l3mvn_studio.page_text import html  # noqa: E402
 
 MAX_CLICKS = 40  # the look-around takes 12 steps; episode 0 of house 0 (toilet) chooses at step 13
 
@@ -150,3 +152,33 @@ def test_the_language_folder_shows_ponis_potentials_like_a_language_models_score
         _open_tab(page, "Episode")
         _wait(lambda: "potential" in _panel_text(page), what="the Frontiers table")
         assert "S_LLM" not in _panel_text(page)
+
+
+@pytest.fixture(scope="module")
+def map_head_dash():
+    from l3mvn.agent.potentials.language_map import shipped_language_map
+
+    if not shipped_language_map().is_file():
+        pytest.skip("the shipped map head is not installed")
+    cfg = Config().with_frame(240, 320)
+    cfg = cfg.replace(policy=replace(cfg.policy, head="map"))
+    yield from serve_dashboard(episodes_per_house=2, policy="l3mvn-ff", cfg=cfg)
+
+
+def test_the_map_head_shows_ponis_potentials_and_names_the_words_and_each_frontiers_sentence(map_head_dash, tmp_path):
+    shots = Path(os.environ.get("L3MVN_SCREENSHOTS", tmp_path))
+    ctl = map_head_dash.controller
+    with _language_page(map_head_dash.url) as page:
+        view = _step_to_first_choice(page, ctl, "step 0 (the sentence embedder loads once)")
+        assert view.fusion.rule == "potentials" and " + minilm words (language_map.pt)" in view.fusion.scorer
+        line = view.fusion.describe()
+        assert "from the object potential and the minilm words of the frontier's window" in line
+        _wait(lambda: line in _panel_text(page), what="the map head's rule line with the snapshot's numbers")
+        text = _panel_text(page)
+        assert "plus what the minilm words of the frontier's window add" in text
+        chosen = next(f for f in view.frontiers if f.chosen)
+        sentence = chosen.queries[view.target]  # the sentence the head read, shown as the frontier's query
+        assert sentence.startswith("This frontier contains") and html(sentence) in page.content()
+        assert f"potential {chosen.s_llm:.2f}" in text and "S_LLM" not in text
+        page.wait_for_timeout(500)
+        page.screenshot(path=str(shots / "dashboard_map_head_panel.png"))

@@ -14,7 +14,7 @@ from torch import nn
 
 from l3mvn.agent.potentials import CHANNELS, OUTPUTS, PotentialModel, PotentialNet, expected_totals
 from l3mvn.agent.potentials.model import GEOMETRY
-from l3mvn.core.categories import GOAL_CATEGORIES
+from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
 from l3mvn.core.config import PotentialConfig
 from l3mvn.run.cli import main
 from l3mvn.run.potentials.train import TrainOptions, _walk_loss, choice_regret, fit_walks
@@ -71,10 +71,14 @@ def test_joined_walks_keep_every_choice_as_it_was(walked):
             np.testing.assert_array_equal(got, want)
         np.testing.assert_array_equal(joined.features[k], part.features[i])
         np.testing.assert_array_equal(joined.size_m(k), part.size_m(i))
+        np.testing.assert_array_equal(joined.objects(k), part.objects(i))
         assert len(joined.size_m(k)) == len(joined.frontiers(k)[0])
         assert joined.choice[k] == part.choice[i] and joined.goal[k] == part.goal[i]
     # The size bonus is cost-utility's utility over its lambda: never negative, and wider frontiers earn some.
     assert (joined.frontier_size_m >= 0).all() and joined.frontier_size_m.max() > 0
+    # Furnished houses put objects in some frontiers' windows: the language input is recorded.
+    assert joined.frontier_objects.shape == (len(joined.frontier_cost), len(GIBSON_CATEGORIES))
+    assert joined.frontier_objects.any()
     empty = WalkSet.join([], 32)
     assert len(empty) == 0 and empty.features.shape == (0, len(CHANNELS), 32, 32)
 
@@ -104,6 +108,7 @@ def _choice(
         cell_frontier=np.array([0, 1], np.int32),
         cell_index=np.array([0, 5], np.int32),
         frontier_size_m=np.array(size_m, np.float32),
+        frontier_objects=np.zeros((2, len(GIBSON_CATEGORIES)), bool),
     )
 
 

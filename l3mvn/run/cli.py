@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from l3mvn.core.config import SUCCESS_RULES, Config, PolicyConfig, TaskConfig, config_dict, config_hash, override
-from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS, LLM_PROMPTS, SELECTIONS
+from l3mvn.core.config.policy import DEFAULT_HEAD, HEAD_KINDS, LLM_PROMPTS, MAP_HEAD, SELECTIONS
 from l3mvn.core.config.sim import BACKENDS
 from l3mvn.core.config.task import VIEW_POINT_RULES
 from l3mvn.core.errors import L3MVNError, one_line
@@ -213,8 +213,9 @@ def build_parser(extra: dict[str, Command] | None = None, only: str | None = Non
         default=None,
         metavar="KIND|FILE",
         help=f"feed-forward scorer: head trained on frontiers of house maps or on room lists ({', '.join(HEAD_KINDS)}; "
-        f"-bag: the same on a bag of objects, without the language model; default {DEFAULT_HEAD}), or a head "
-        "file from `l3mvn train-head`",
+        f"-bag: the same on a bag of objects, without the language model; default {DEFAULT_HEAD}); {MAP_HEAD}: "
+        "PONI's potentials from the partial map corrected by the words of each frontier's window; or a head "
+        "file from `l3mvn train-head` or `l3mvn poni train-language`",
     )
     ev.add_argument(
         "--embedder",

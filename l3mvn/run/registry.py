@@ -98,6 +98,8 @@ def _map_agent(global_policy: Callable[[PolicyContext], GlobalPolicy]) -> Callab
 def _language(name: str, language: Language) -> Callable[[PolicyContext], Policy]:
     def policy(ctx: PolicyContext) -> GlobalPolicy:
         p = ctx.config.policy
+        if _reads_map_head(name, p):
+            return _map_head_policy(name, language, ctx.config)
         return LanguageFrontierPolicy(
             name,
             scorer_of(name, p) or language.scorer,
@@ -136,13 +138,56 @@ def _potential_model(checkpoint: str | None, cfg: PotentialConfig):  # -> Potent
     return PotentialModel.load(checkpoint, cfg)
 
 
+def _reads_map_head(name: str, options: PolicyConfig) -> bool:
+    """Whether policy ``name`` scores with the feed-forward scorer and its head is a map head."""
+    if scorer_of(name, options) != HEAD_SCORER or options.head is None:
+        return False
+    from l3mvn.agent.potentials.language_map import map_head_file
+
+    return map_head_file(options.head) is not None
+
+
+@cache
+def _map_head(file: str, poni_checkpoint: str):  # -> LanguageMapHead (torch loads on first use)
+    from l3mvn.agent.potentials.language_map import LanguageMapHead
+
+    return LanguageMapHead.load(file, poni_checkpoint)
+
+
+def _map_head_policy(name: str, language: Language, config: Config) -> GlobalPolicy:
+    """PONI's policy with the map head's words: what the feed-forward policies become with ``--head map``."""
+    from l3mvn.agent.potentials import PotentialPolicy
+    from l3mvn.agent.potentials.language_map import map_head_file
+
+    p = config.policy
+    if language.exploration != "cost-utility":
+        raise L3MVNError(
+            f"the map head adds to PONI's totals, which carry cost-utility's bonuses: policy {name!r} fuses "
+            f"with {language.exploration!r}; use it with l3mvn-ff"
+        )
+    if p.selection != PolicyConfig.selection or p.embedder is not None:
+        raise L3MVNError(
+            "the map head chooses by PONI's least total and reads the embedder it was trained with: "
+            "--selection and --embedder apply to the object-list heads (frontiers, rooms and their bags)"
+        )
+    model = _potential_model(config.poni.checkpoint, config.poni)
+    file = map_head_file(p.head)
+    assert file is not None  # ``_reads_map_head`` said so
+    words = _map_head(str(file), model.source)
+    return PotentialPolicy(model, config.poni, config.frontiers.cu_lambda, words, name)
+
+
 def _head_ready(name: str) -> Callable[[Config], None]:
     """Where policy ``name`` scores with the feed-forward scorer, load its head and embedder once:
     an unknown head file or an embedder without a head is one line before any episode runs."""
 
     def ready(config: Config) -> None:
         p = config.policy
-        if scorer_of(name, p) == HEAD_SCORER:
+        if _reads_map_head(name, p):
+            spec = policy_spec(name)
+            assert spec.language is not None  # only language specs are made ready with this
+            _map_head_policy(name, spec.language, config)
+        elif scorer_of(name, p) == HEAD_SCORER:
             shared_scorer(HEAD_SCORER, p.head, embedder=p.embedder)
 
     return ready

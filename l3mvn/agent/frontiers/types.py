@@ -52,6 +52,11 @@ class Fusion:
     bonus_m: tuple[float, ...] = ()  # expected: size bonus U / lambda
     expected_m: tuple[float, ...] = ()  # expected: the head's metres on from each frontier to the goal
     scorer: str = ""  # what gave the S_LLM scores: the scorer, and its model where it has one
+    words: str = ""  # potentials with a map head: the embedder whose reading of the window adds metres
+
+    @property
+    def _words(self) -> str:
+        return f" and the {self.words} words of the frontier's window" if self.words else ""
 
     @property
     def max_s_llm(self) -> float:
@@ -68,7 +73,8 @@ class Fusion:
         if self.rule == POTENTIALS_RULE:
             return (
                 f"PONI: least metres to the frontier - bonus ({self.exploration}) + expected metres on to the "
-                "goal (from the object potential): " + self._versus(self.compared, least=True, fmt=self._total)
+                f"goal (from the object potential{self._words}): "
+                + self._versus(self.compared, least=True, fmt=self._total)
             )
         if self.rule == "official_code":  # S_LLM as compared: a frontier without objects counts 0.1 + 0.1 U / max U
             head = f"official code: max S_LLM {max(self.compared):.2f}"

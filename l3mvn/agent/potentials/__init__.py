@@ -4,7 +4,7 @@ area potential) and how near each goal is (the object potentials). The policy re
 frontiers. Training data comes from full house maps, then from a prior-free agent's walks on them
 (``l3mvn.run.potentials``)."""
 
-from l3mvn.agent.potentials.features import CHANNELS, OUTPUTS, WindowGrid, window_features
+from l3mvn.agent.potentials.features import CHANNELS, OUTPUTS, WindowGrid, objects_hot, window_features
 from l3mvn.agent.potentials.model import PotentialModel, PotentialNet, shipped_checkpoint
 from l3mvn.agent.potentials.policy import PotentialPolicy, expected_totals
 
@@ -17,5 +17,6 @@ __all__ = [
     "WindowGrid",
     "shipped_checkpoint",
     "expected_totals",
+    "objects_hot",
     "window_features",
 ]

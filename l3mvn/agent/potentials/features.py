@@ -87,3 +87,13 @@ def window_features(
         pooled = block.reshape(n, f, n, f)
         out[k] = pooled.mean(axis=(1, 3)) if k == 0 else pooled.max(axis=(1, 3))
     return out
+
+
+def objects_hot(object_lists: list[tuple[str, ...]]) -> np.ndarray:
+    """(len(object_lists), len(GIBSON_CATEGORIES)) bool: which SemExp categories each frontier's
+    window holds (its ``Frontier.objects``); a name outside them has no column, as it has no channel."""
+    index = {name: k for k, name in enumerate(GIBSON_CATEGORIES)}
+    out = np.zeros((len(object_lists), len(GIBSON_CATEGORIES)), dtype=bool)
+    for row, names in enumerate(object_lists):
+        out[row, [index[n] for n in names if n in index]] = True
+    return out

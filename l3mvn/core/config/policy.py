@@ -18,6 +18,11 @@ SELECTIONS = ("paper", "official_code", "expected")
 # "-bag": the same head, data and recipe on a multi-hot bag of objects, without the language model
 # (the ablation that says what MiniLM adds; l3mvn/data/language/MODEL_CARD.md).
 HEAD_KINDS = ("frontiers", "rooms", "frontiers-bag", "rooms-bag")
+# Beside those object-list heads, the map head: PONI's metres on from the partial map, corrected by the
+# words of each frontier's window (a language + map prior, l3mvn.agent.potentials.language_map; the
+# policy then chooses by PONI's least total).
+MAP_HEAD = "map"
+POLICY_HEADS = (*HEAD_KINDS, MAP_HEAD)
 DEFAULT_HEAD = "rooms"
 HEAD_FILE_SUFFIX = ".pt"
 HEAD_SCORER = "feedforward"  # the one language scorer that reads a head
@@ -36,7 +41,7 @@ class PolicyConfig:
     bound_low: float = 0.15
     bound_high: float = 0.30
     seg_noise: float = 0.0  # map-based policies: perception errors (see l3mvn.agent.perception)
-    head: str | None = None  # feed-forward scorer: a head kind instead of DEFAULT_HEAD, or a head file (.pt)
+    head: str | None = None  # feed-forward scorer: a head (POLICY_HEADS) instead of DEFAULT_HEAD, or a head file (.pt)
     # ... and the sentence embedder whose head it reads (Emb(W)): minilm, or an LLM (a named one or a
     # .gguf file) embedding the sentence itself; None: minilm, or the embedder a head file names.
     embedder: str | None = None
@@ -46,10 +51,10 @@ class PolicyConfig:
     def __post_init__(self) -> None:
         if self.selection not in SELECTIONS:
             raise L3MVNError(f"unknown selection {self.selection!r}; valid: {', '.join(SELECTIONS)}")
-        if self.head is not None and self.head not in HEAD_KINDS and not self.head.endswith(HEAD_FILE_SUFFIX):
+        if self.head is not None and self.head not in POLICY_HEADS and not self.head.endswith(HEAD_FILE_SUFFIX):
             raise L3MVNError(
-                f"unknown feed-forward head {self.head!r}; valid: {', '.join(HEAD_KINDS)} or a head file "
-                f"(*{HEAD_FILE_SUFFIX}, from `l3mvn train-head`)"
+                f"unknown feed-forward head {self.head!r}; valid: {', '.join(POLICY_HEADS)} or a head file "
+                f"(*{HEAD_FILE_SUFFIX}, from `l3mvn train-head` or `l3mvn poni train-language`)"
             )
         if self.embedder is not None and not self.embedder.strip():
             raise L3MVNError("policy.embedder must name a sentence embedder (minilm, smollm2-135m, ...) or be unset")

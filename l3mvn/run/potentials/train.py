@@ -61,6 +61,7 @@ class TrainOptions:
     # The second stage: the agent's own choices (``walks``), fine-tuning the first stage's net.
     walk_episodes: int = 12  # episodes walked per Gibson floor (train, val and test houses)
     walk_procedural_houses: int = 1000
+    walk_procedural_first: int = 0  # the first procedural house walked (a later one is one never walked before)
     walk_episodes_per_procedural: int = 2
     walk_epochs: int = 3
     walk_learning_rate: float = 1e-3
@@ -415,13 +416,8 @@ def train_potentials(
     drawn["train"] += [
         (_procedural_seed(options, k), options.samples_per_procedural) for k in range(options.procedural_houses)
     ]
-    walked = floors(options.walk_episodes)
-    walked["train"] += [
-        (_procedural_seed(options, k), options.walk_episodes_per_procedural)
-        for k in range(options.walk_procedural_houses)
-    ]
+    walked = walk_sources(dataset, split, options)
     drawn = {k: [(src, n) for src, n in v if n > 0] for k, v in drawn.items()}
-    walked = {k: [(src, n) for src, n in v if n > 0] for k, v in walked.items()}
     if not drawn["train"] and not walked["train"]:
         raise L3MVNError("nothing to train on: give --dataset with train houses, or procedural houses to draw or walk")
     sets: dict[str, SampleSet] = {}
@@ -442,23 +438,11 @@ def train_potentials(
             log(f"{name}: {len(sets[name])} windows from {len(drawn[name])} floors in {took:.0f} s")
         net, history = fit(sets["train"], sets["val"], cfg, options, log, net=net)
     if walked["train"] and options.walk_epochs:
-        frame = (options.walk_height, options.walk_width)
-        for name in HOUSE_SPLITS:
-            started = time.monotonic()
-
-            def step(done: int, total: int, name: str = name) -> None:
-                if done == total or done % 100 == 0:
-                    log(f"walking {name} floors: {done}/{total}")
-
-            walking = cfg
-            if options.walker == "poni":  # PONI walks as its checkpoint was trained to
-                assert start is not None  # refused above without --init
-                walking = replace(cfg, checkpoint=str(init), size_bonus=bool(start.geometry["size_bonus"]))
-            jobs = [WalkJob(src, n, options.seed + 1, frame, walking, options.walker) for src, n in walked[name]]
-            walks[name] = walk_floors(jobs, options.workers, step)
-            log(f"{name}: {len(walks[name])} choices from {len(jobs)} floors in {time.monotonic() - started:.0f} s")
-        if not len(walks["train"]):
-            raise L3MVNError("the walks gave no choice among two or more frontiers to learn from")
+        walking = cfg
+        if options.walker == "poni":  # PONI walks as its checkpoint was trained to
+            assert start is not None  # refused above without --init
+            walking = replace(cfg, checkpoint=str(init), size_bonus=bool(start.geometry["size_bonus"]))
+        walks = walk_splits(walked, walking, options, log)
         net, walk_history = fit_walks(net, walks["train"], walks["val"], cfg, options, log)
     scores: dict[str, dict[str, float]] = {
         name: evaluate(net, sets[name], cfg) for name in ("val", "test") if name in sets and len(sets[name])
@@ -494,6 +478,42 @@ def _procedural_seed(options: TrainOptions, k: int) -> int:
     return options.seed * 100_000 + k
 
 
+def walk_sources(dataset: str | None, split: str, options: TrainOptions) -> dict[str, list[tuple[Source, int]]]:
+    """The floors walked on each side of the house split, with their episode counts: the SemExp
+    split's houses and, on the train side, ``options.walk_procedural_houses`` procedural ones."""
+    walked = gibson_sources(dataset, split, options.walk_episodes) if dataset else {s: [] for s in HOUSE_SPLITS}
+    walked["train"] += [
+        (_procedural_seed(options, k), options.walk_episodes_per_procedural)
+        for k in range(options.walk_procedural_first, options.walk_procedural_first + options.walk_procedural_houses)
+    ]
+    return {k: [(src, n) for src, n in v if n > 0] for k, v in walked.items()}
+
+
+def walk_splits(
+    walked: dict[str, list[tuple[Source, int]]],
+    walking: PotentialConfig,
+    options: TrainOptions,
+    log: Callable[[str], None],
+) -> dict[str, WalkSet]:
+    """``options.walker`` walks every side's floors (PONI with ``walking``'s checkpoint); refused in
+    one line when the train side gives no choice among two or more frontiers."""
+    frame = (options.walk_height, options.walk_width)
+    walks: dict[str, WalkSet] = {}
+    for name in HOUSE_SPLITS:
+        started = time.monotonic()
+
+        def step(done: int, total: int, name: str = name) -> None:
+            if done == total or done % 100 == 0:
+                log(f"walking {name} floors: {done}/{total}")
+
+        jobs = [WalkJob(src, n, options.seed + 1, frame, walking, options.walker) for src, n in walked[name]]
+        walks[name] = walk_floors(jobs, options.workers, step)
+        log(f"{name}: {len(walks[name])} choices from {len(jobs)} floors in {time.monotonic() - started:.0f} s")
+    if not len(walks["train"]):
+        raise L3MVNError("the walks gave no choice among two or more frontiers to learn from")
+    return walks
+
+
 # --- the command (registered by l3mvn.run.cli as `l3mvn poni`) ------------------------------------------
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="poni_command", required=True)
@@ -526,6 +546,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     tr.add_argument("--seed", type=int, default=defaults.seed)
     tr.add_argument("--workers", type=_count, default=defaults.workers)
+    words = sub.add_parser(
+        "train-language",
+        help="train l3mvn-ff's map head: the words of a frontier's window added to a PONI checkpoint's metres",
+    )
+    from l3mvn.run.potentials import language_map
+
+    language_map.add_arguments(words, _count)
     show = sub.add_parser("show", help="what a checkpoint was trained on and how it scored")
     show.add_argument("checkpoint", nargs="?", default=None, help="a .pt (default: the shipped one)")
 
@@ -537,6 +564,10 @@ def _count(raw: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.poni_command == "train-language":
+        from l3mvn.run.potentials import language_map
+
+        return language_map.run(args)
     if args.poni_command == "show":
         model = PotentialModel.load(args.checkpoint, PotentialConfig(), to_fine_tune=True)
         print(json.dumps({"checkpoint": model.source, "geometry": model.geometry, **model.training}, indent=2))

@@ -23,8 +23,8 @@ import numpy as np
 
 from l3mvn.agent.policies.global_policies import size_bonus_m
 from l3mvn.agent.policies.oracle_frontier import frontier_goal_distances
-from l3mvn.agent.potentials import CHANNELS, WindowGrid, window_features
-from l3mvn.core.categories import GOAL_CATEGORIES
+from l3mvn.agent.potentials import CHANNELS, WindowGrid, objects_hot, window_features
+from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
 from l3mvn.core.config import Config, PotentialConfig
 from l3mvn.run.potentials.samples import Source, source_scene
 from l3mvn.run.runner import Runner
@@ -53,6 +53,7 @@ class WalkSet:
     cell_frontier: np.ndarray
     cell_index: np.ndarray
     frontier_size_m: np.ndarray
+    frontier_objects: np.ndarray
 
     def __post_init__(self) -> None:
         self._frontiers = np.searchsorted(self.frontier_sample, np.arange(len(self.features) + 1))
@@ -70,6 +71,10 @@ class WalkSet:
     def size_m(self, i: int) -> np.ndarray:
         """Sample i's frontiers' size bonus (F,) in metres."""
         return self.frontier_size_m[self._frontiers[i] : self._frontiers[i + 1]]
+
+    def objects(self, i: int) -> np.ndarray:
+        """Sample i's frontiers' window categories (F, len(GIBSON_CATEGORIES)) bool."""
+        return self.frontier_objects[self._frontiers[i] : self._frontiers[i + 1]]
 
     @classmethod
     def join(cls, parts: list[WalkSet], cells: int) -> WalkSet:
@@ -90,6 +95,7 @@ class WalkSet:
             cat([p.cell_frontier + o for p, o in zip(parts, frontiers)], np.zeros(0, np.int32)),
             cat([p.cell_index for p in parts], np.zeros(0, np.int32)),
             cat([p.frontier_size_m for p in parts], np.zeros(0, np.float32)),
+            cat([p.frontier_objects for p in parts], np.zeros((0, len(GIBSON_CATEGORIES)), bool)),
         )
 
 
@@ -126,7 +132,7 @@ def walk_floor(job: WalkJob) -> WalkSet:
         for g in GOAL_CATEGORIES
         if g in scene.categories and scene.category_mask(g).any()
     }
-    features, goals, choices, costs, sizes, metres, cell_lists = [], [], [], [], [], [], []
+    features, goals, choices, costs, sizes, metres, cell_lists, objects = [], [], [], [], [], [], [], []
     for episode in episodes:
         session = runner.session(scene, job.walker)
         session.start(episode)
@@ -148,6 +154,7 @@ def walk_floor(job: WalkJob) -> WalkSet:
             sizes.append(size_bonus_m(frontiers, cfg.frontiers.cu_lambda).astype(np.float32))
             metres.append(np.where(np.isfinite(truth), truth, np.nan))
             cell_lists.append([grid.flat_cells(f.cells).astype(np.int32) for f in frontiers])
+            objects.append(objects_hot([f.objects for f in frontiers]))
     if not features:
         return WalkSet.join([], cells)
     per_sample = [len(c) for c in costs]
@@ -163,6 +170,7 @@ def walk_floor(job: WalkJob) -> WalkSet:
         np.repeat(np.arange(len(flat_cells), dtype=np.int32), [len(c) for c in flat_cells]),
         np.concatenate(flat_cells) if flat_cells else np.zeros(0, np.int32),
         np.concatenate(sizes),
+        np.concatenate(objects),
     )
 
 
