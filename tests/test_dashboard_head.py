@@ -11,7 +11,7 @@ import pytest
 from conftest import serve_dashboard
 
 from l3mvn.core.config import Config, PolicyConfig, SimConfig, config_hash
-from l3mvn.core.config.policy import HEAD_KINDS
+from l3mvn.core.config.policy import POLICY_HEADS
 from l3mvn.core.errors import L3MVNError
 from l3mvn.run.registry import scorer_of, with_scorer
 from l3mvn.world.datasets import load_episode_set
@@ -53,7 +53,7 @@ def _with_head(head: str | None) -> Config:
 
 
 def test_the_head_starts_on_the_config_and_a_pick_is_what_the_next_reset_scores_with(ctl):
-    assert ctl.head == "frontiers-bag" and ctl.head_names() == (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS
+    assert ctl.head == "frontiers-bag" and ctl.head_names() == (DEFAULT_HEAD_CHOICE,) + POLICY_HEADS
     first = _reset(ctl)
     assert first.policy.global_policy.scorer.kind == "frontiers-bag"
     assert first.config_hash == _hash(_with_head("frontiers-bag"), "l3mvn-ff")
@@ -72,7 +72,7 @@ def test_an_unknown_head_is_refused_with_the_valid_ones_and_changes_nothing(ctl)
     with pytest.raises(
         L3MVNError,
         match=r"^unknown head 'bogus'; valid heads: default \(rooms\), frontiers, rooms, "
-        r"frontiers-bag, rooms-bag$",
+        r"frontiers-bag, rooms-bag, map$",
     ):
         ctl.set_head("bogus")
     assert ctl.head == "frontiers-bag" and not ctl.notices
@@ -109,7 +109,7 @@ def dash():
 
 def test_the_dropdown_starts_on_the_configs_head_and_is_held_with_the_other_controls(dash):
     head = dash.view.head
-    assert head.value == "frontiers-bag" and tuple(head.options) == (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS
+    assert head.value == "frontiers-bag" and tuple(head.options) == (DEFAULT_HEAD_CHOICE,) + POLICY_HEADS
     assert head in dash.view._held
     assert "feed-forward scoring only (l3mvn-ff, near+llm or Scorer feedforward)" in head.hint
 
@@ -139,7 +139,7 @@ def test_a_head_file_the_server_starts_with_is_one_of_the_head_choices(tmp_path)
     save_head(GoalHead(384, len(GOALS)).eval(), meta, path)
     c = _controller(_with_head(str(path)), "l3mvn-ff")
     try:
-        assert c.head == str(path) and c.head_names() == (DEFAULT_HEAD_CHOICE,) + HEAD_KINDS + (str(path),)
+        assert c.head == str(path) and c.head_names() == (DEFAULT_HEAD_CHOICE,) + POLICY_HEADS + (str(path),)
         assert _reset(c).policy.global_policy.scorer.meta["kind"] == "frontiers"
         c.set_head("rooms")
         c.set_head(str(path))  # the file can be chosen again after another head

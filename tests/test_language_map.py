@@ -194,6 +194,9 @@ def test_train_language_walks_fits_saves_and_the_head_runs_in_an_episode(tmp_pat
     assert summary["out"] == str(out) and summary["choices"]["train"] >= 1
     head = LanguageMapHead.load(out, poni)
     assert [row["epoch"] for row in head.training["history"]] == [0, 1, 2]
+    assert main(["poni", "show", str(out)]) == 0  # what it reads and corrects, without its weights
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["kind"] == "language-map" and shown["poni_sha256"] == head.poni_sha256 and "state" not in shown
     assert head.training["walking"]["walk_procedural_first"] == 5 and head.training["poni_checkpoint"] == "poni.pt"
     results = tmp_path / "ff.jsonl"
     sets = ["--set", "sim.max_steps=30", "--set", f"poni.checkpoint={poni}"]

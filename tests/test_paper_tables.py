@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 from l3mvn.core.config import Config
 from l3mvn.run.cli import main
 from l3mvn.run.eval.paper_tables import TABLES, TableRun, run_table
@@ -36,5 +38,11 @@ def test_table_one_runs_its_rows_and_names_those_it_cannot_run_and_why(tmp_path,
     assert "| SemExp | 0.652 / 0.336 / 1.520 | 0.379 / 0.188 / 2.943 | not run |  |" in out
     assert "- SemExp: SemExp's global policy is a network trained with reinforcement learning" in out
     assert "- PONI: " not in out and "| PONI | 0.736 / 0.410 / 1.250 |" in out  # PONI runs: its own network
-    ran = [row.policy for row in TABLES["paper-1"][1] if row.policy is not None]
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(f"paper-1_{p}.jsonl" for p in ran)
+    assert "| L3MVN (Feed-forward), map head: PONI + words (not in the paper) | - | - | " in out
+    ran = [(row.policy, row.head) for row in TABLES["paper-1"][1] if row.policy is not None]
+    names = [f"paper-1_{p}_{h}-head.jsonl" if h else f"paper-1_{p}.jsonl" for p, h in ran]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names) and "paper-1_l3mvn-ff_map-head.jsonl" in names
+    row = json.loads((tmp_path / "paper-1_l3mvn-ff_map-head.jsonl").read_text().splitlines()[0])
+    assert row["config"]["policy"]["head"] == "map"
+    plain = json.loads((tmp_path / "paper-1_l3mvn-ff.jsonl").read_text().splitlines()[0])
+    assert plain["config"]["policy"]["head"] is None

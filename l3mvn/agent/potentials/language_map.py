@@ -75,6 +75,21 @@ def window_sentences(hot: np.ndarray) -> list[str]:
     return [frontier_query([GIBSON_CATEGORIES[k] for k in np.flatnonzero(row)]) for row in hot]
 
 
+def _read(path: str | Path | None) -> tuple[Path, dict[str, Any]]:
+    """The file a map head ``path`` names (None: the shipped one) and its dict, refused in one line
+    when missing, unreadable or of another kind."""
+    file = Path(path) if path is not None else shipped_language_map()
+    if not file.is_file():
+        raise L3MVNError(f"map head {file} does not exist; train one with `l3mvn poni train-language --out FILE.pt`")
+    try:
+        blob = torch.load(file, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many kinds for a damaged or foreign file
+        raise L3MVNError(f"cannot read map head {file}: {first_line(exc)}") from None
+    if not isinstance(blob, dict) or blob.get("kind") != KIND or not _KEYS <= set(blob):
+        raise L3MVNError(f"{file} is not a map head from `l3mvn poni train-language` (kind or keys missing)")
+    return file, blob
+
+
 class LanguageResidual(nn.Module):
     """Embedding -> hidden -> metres per goal, the last layer zero at the start (PONI unchanged)."""
 
@@ -107,17 +122,7 @@ class LanguageMapHead:
     def load(cls, path: str | Path | None, poni_checkpoint: str | Path) -> LanguageMapHead:
         """The head at ``path`` (None: the shipped one), refused in one line when missing, unreadable,
         of another kind, or trained over another PONI checkpoint than ``poni_checkpoint``."""
-        file = Path(path) if path is not None else shipped_language_map()
-        if not file.is_file():
-            raise L3MVNError(
-                f"map head {file} does not exist; train one with `l3mvn poni train-language --out FILE.pt`"
-            )
-        try:
-            blob = torch.load(file, map_location="cpu", weights_only=True)
-        except Exception as exc:  # torch raises many kinds for a damaged or foreign file
-            raise L3MVNError(f"cannot read map head {file}: {first_line(exc)}") from None
-        if not isinstance(blob, dict) or blob.get("kind") != KIND or not _KEYS <= set(blob):
-            raise L3MVNError(f"{file} is not a map head from `l3mvn poni train-language` (kind or keys missing)")
+        file, blob = _read(path)
         if tuple(blob["goals"]) != GOAL_CATEGORIES:
             raise L3MVNError(f"{file} predicts {list(blob['goals'])}; this version's goals are {list(GOAL_CATEGORIES)}")
         poni_sha = file_sha256(poni_checkpoint)
@@ -136,6 +141,14 @@ class LanguageMapHead:
             raise L3MVNError(f"{file}: weights do not fit the map head: {first_line(exc)}") from None
         net.eval()
         return cls(net, str(blob["encoder"]), poni_sha, dict(blob.get("training", {})), str(file))
+
+    @staticmethod
+    def record(path: str | Path | None) -> dict[str, Any]:
+        """What the head at ``path`` (None: the shipped one) reads, corrects and was trained on, without
+        its weights: ``l3mvn poni show`` prints it."""
+        file, blob = _read(path)
+        keys = ("encoder", "hidden", "goals", "poni_sha256", "training")
+        return {"map_head": str(file), "kind": KIND} | {k: blob[k] for k in keys if k in blob}
 
     def save(self, path: str | Path) -> None:
         blob = {

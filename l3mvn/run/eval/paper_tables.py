@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TextIO
 
 from l3mvn.core.config import Config
+from l3mvn.core.config.policy import MAP_HEAD
 from l3mvn.run.eval.evaluation import evaluate
 from l3mvn.run.eval.job import EvalJob
 from l3mvn.run.eval.metrics import summarize
@@ -23,13 +24,15 @@ from l3mvn.run.eval.metrics import summarize
 class PaperRow:
     """A row of the paper: its name, its numbers per dataset (success, SPL, DTG), and the policy that
     runs it here (None: why it cannot); ``seg_noise``: the row used a trained detector, not ground-truth
-    segmentation, which ``--seg-noise`` stands in for."""
+    segmentation, which ``--seg-noise`` stands in for; ``head``: the feed-forward head the row runs
+    with, in place of the configured one."""
 
     method: str
     paper: dict[str, tuple[float, float, float] | None]
     policy: str | None
     missing: str = ""
     seg_noise: bool = False
+    head: str | None = None
 
 
 TABLES: dict[str, tuple[str, tuple[PaperRow, ...]]] = {
@@ -57,6 +60,7 @@ TABLES: dict[str, tuple[str, tuple[PaperRow, ...]]] = {
             PaperRow(
                 "L3MVN (Feed-forward)", {"Gibson": (0.769, 0.388, 1.008), "HM3D": (0.542, 0.255, 3.934)}, "l3mvn-ff"
             ),
+            PaperRow("L3MVN (Feed-forward), map head: PONI + words (not in the paper)", {}, "l3mvn-ff", head=MAP_HEAD),
             PaperRow("Exp (cost-utility; not a row of the paper's table)", {}, "cost-utility"),
             PaperRow("Frontier oracle (ground truth; not in the paper)", {}, "oracle-frontier"),
         ),
@@ -99,7 +103,8 @@ def run_table(name: str, run: TableRun, stream: TextIO | None = None) -> str:
         if row.policy is None:
             continue
         noise = run.seg_noise if row.seg_noise else 0.0
-        config = replace(run.config, policy=replace(run.config.policy, seg_noise=noise))
+        policy = replace(run.config.policy, seg_noise=noise, head=row.head or run.config.policy.head)
+        config = replace(run.config, policy=policy)
         job = EvalJob.create(
             run.dataset,
             run.split,
@@ -111,7 +116,10 @@ def run_table(name: str, run: TableRun, stream: TextIO | None = None) -> str:
             scenes=run.scenes,
         )
         episodes = job.load().episodes[: run.episodes] if run.episodes else job.load().episodes
-        out = run.results / f"{name}_{row.policy}{'_seg-noise' if noise else ''}.jsonl"
+        out = (
+            run.results
+            / f"{name}_{row.policy}{f'_{row.head}-head' if row.head else ''}{'_seg-noise' if noise else ''}.jsonl"
+        )
         done = evaluate(job, episodes, out=str(out), resume=True, workers=run.workers, stream=stream)
         ours[row.method] = summarize(list(done.rows.values())) if done.rows else None
     return format_table(title, rows, ours, run)

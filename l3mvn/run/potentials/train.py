@@ -553,8 +553,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from l3mvn.run.potentials import language_map
 
     language_map.add_arguments(words, _count)
-    show = sub.add_parser("show", help="what a checkpoint was trained on and how it scored")
-    show.add_argument("checkpoint", nargs="?", default=None, help="a .pt (default: the shipped one)")
+    show = sub.add_parser("show", help="what a checkpoint or a map head was trained on and how it scored")
+    show.add_argument(
+        "checkpoint", nargs="?", default=None, help="a PONI checkpoint or a map head .pt (default: the shipped PONI)"
+    )
 
 
 def _count(raw: str) -> int:
@@ -569,6 +571,11 @@ def run(args: argparse.Namespace) -> int:
 
         return language_map.run(args)
     if args.poni_command == "show":
+        from l3mvn.agent.potentials.language_map import LanguageMapHead, is_language_map
+
+        if args.checkpoint is not None and is_language_map(args.checkpoint):
+            print(json.dumps(LanguageMapHead.record(args.checkpoint), indent=2))
+            return 0
         model = PotentialModel.load(args.checkpoint, PotentialConfig(), to_fine_tune=True)
         print(json.dumps({"checkpoint": model.source, "geometry": model.geometry, **model.training}, indent=2))
         return 0
