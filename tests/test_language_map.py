@@ -13,7 +13,6 @@ from l3mvn.agent.potentials import OUTPUTS, PotentialModel, PotentialNet, Potent
 from l3mvn.agent.potentials.language_map import (
     LanguageMapHead,
     LanguageResidual,
-    file_sha256,
     map_head_file,
     shipped_language_map,
     window_sentences,
@@ -22,6 +21,7 @@ from l3mvn.agent.potentials.model import GEOMETRY
 from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
 from l3mvn.core.config import PotentialConfig
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.paths import file_sha256
 from l3mvn.run.cli import main
 from l3mvn.run.potentials.language_map import LanguageMapOptions, Lists, fit_language_map, regret
 from tests.test_potentials import CELLS, POLICY_CFG, _model, _potentials, _sem_map

@@ -7,6 +7,7 @@ may reach outside: a ``..``, an absolute path or a separator in a name would rea
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path, PurePath
 
 from l3mvn.core.errors import L3MVNError
@@ -43,3 +44,12 @@ def relative_parts(path: str, what: str, root: object) -> tuple[str, ...]:
     if ".." in parts or not parts:
         raise L3MVNError(f"{what} {path!r} would leave {root}: it must name a file inside it (no '..' parts)")
     return parts
+
+
+def file_sha256(path: str | Path) -> str:
+    """The SHA-256 of a file's bytes, read in blocks: what names a model file or ties a file to another."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(1 << 20):
+            digest.update(block)
+    return digest.hexdigest()

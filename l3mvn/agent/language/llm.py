@@ -18,7 +18,6 @@ file is a new model, with its own cache.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import importlib
 import importlib.util
 import io
@@ -32,6 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from l3mvn.core.errors import L3MVNError, first_line
+from l3mvn.core.paths import file_sha256
 from l3mvn.core.writing import write_file
 
 if TYPE_CHECKING:
@@ -141,7 +141,7 @@ def model_id(model: str) -> str:
     """``<name>-<first 16 hex digits of the file's sha256>``: a model's identity in caches and results
     (the hash is read once per process: the files are hundreds of MB)."""
     path = gguf_path(model)
-    return f"{LLM_MODELS[model].name if model in LLM_MODELS else path.stem}-{_sha256(path)[:16]}"
+    return f"{LLM_MODELS[model].name if model in LLM_MODELS else path.stem}-{file_sha256(path)[:16]}"
 
 
 @cache
@@ -194,11 +194,3 @@ def _convert(path: Path, folder: Path) -> None:
             raise
     finally:
         shutil.rmtree(partial, ignore_errors=True)
-
-
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as f:
-        while block := f.read(1 << 20):
-            digest.update(block)
-    return digest.hexdigest()

@@ -17,7 +17,6 @@ another, it is refused) and ``training``.
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,7 +28,7 @@ from torch import nn
 from l3mvn.core.categories import GIBSON_CATEGORIES, GOAL_CATEGORIES
 from l3mvn.core.config.policy import HEAD_FILE_SUFFIX, MAP_HEAD
 from l3mvn.core.errors import L3MVNError, first_line
-from l3mvn.core.paths import PACKAGE_DATA
+from l3mvn.core.paths import PACKAGE_DATA, file_sha256
 from l3mvn.core.writing import replacing
 
 KIND = "language-map"
@@ -38,14 +37,6 @@ _KEYS = {"kind", "state", "hidden", "encoder", "goals", "poni_sha256"}
 
 def shipped_language_map() -> Path:
     return PACKAGE_DATA / "potentials" / "language_map.pt"
-
-
-def file_sha256(path: str | Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def is_language_map(path: str | Path) -> bool:

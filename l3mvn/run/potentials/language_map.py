@@ -29,13 +29,13 @@ from l3mvn.agent.potentials import OUTPUTS, PotentialModel, expected_totals, shi
 from l3mvn.agent.potentials.language_map import (
     LanguageMapHead,
     LanguageResidual,
-    file_sha256,
     shipped_language_map,
     window_sentences,
 )
 from l3mvn.core.config import PotentialConfig
 from l3mvn.core.errors import L3MVNError
-from l3mvn.run.potentials.train import TrainOptions, walk_sources, walk_splits
+from l3mvn.core.paths import file_sha256
+from l3mvn.run.potentials.train import Epochs, TrainOptions, walk_sources, walk_splits
 from l3mvn.run.potentials.walks import WalkSet
 
 # The shipped PONI checkpoint walked procedural houses 0-999: the head learns on houses after them.
@@ -156,8 +156,7 @@ def fit_language_map(
     rng = np.random.default_rng(options.seed)
     net = LanguageResidual(embeddings.shape[1], options.hidden)
     opt = torch.optim.AdamW(net.parameters(), lr=options.learning_rate, weight_decay=options.weight_decay)
-    history: list[dict[str, float]] = []
-    best: tuple[float, dict[str, torch.Tensor]] | None = None
+    epochs = Epochs[LanguageResidual](log)
     batches = max(1, math.ceil(len(train) / options.batch))
     for epoch in range(options.epochs + 1):
         started, total = time.monotonic(), 0.0
@@ -172,19 +171,12 @@ def fit_language_map(
                 opt.step()
                 total += loss.item()
         net.eval()
-        row: dict[str, float] = {"epoch": epoch, "seconds": round(time.monotonic() - started, 1)}
+        row: dict[str, float] = {"epoch": epoch, "seconds": time.monotonic() - started}
         if epoch:
-            row["train_loss"] = round(total / batches, 4)
-        row |= {f"train_{k}": round(v, 4) for k, v in regret(net, embeddings, train).items() if k != "choices"}
-        row |= {f"val_{k}": round(v, 4) for k, v in regret(net, embeddings, val).items() if k != "choices"}
-        history.append(row)
-        log(json.dumps(row))
-        if best is None or row["val_regret_m"] < best[0]:
-            best = (row["val_regret_m"], {k: v.detach().clone() for k, v in net.state_dict().items()})
-    assert best is not None
-    net.load_state_dict(best[1])
-    net.eval()
-    return net, history
+            row["train_loss"] = total / batches
+        row |= {f"train_{k}": v for k, v in regret(net, embeddings, train).items() if k != "choices"}
+        epochs.add(net, row, regret(net, embeddings, val))
+    return epochs.best_net(net)
 
 
 def train_language_map(

@@ -33,9 +33,11 @@ from contextlib import ExitStack
 from dataclasses import asdict, dataclass, replace
 from multiprocessing import get_context
 from pathlib import Path
+from typing import Generic, TypeVar
 
 import numpy as np
 import torch
+from torch import nn
 
 from l3mvn.agent.language.frontier_head import HOUSE_SPLITS, house_split
 from l3mvn.agent.potentials import CHANNELS, OUTPUTS, PotentialModel, PotentialNet, expected_totals, shipped_checkpoint
@@ -45,6 +47,8 @@ from l3mvn.core.errors import L3MVNError
 from l3mvn.run.potentials.samples import NO_LABEL, HouseTruth, RevealOptions, Source, source_scene
 from l3mvn.run.potentials.walks import WALKERS, WalkJob, WalkSet, walk_floors
 from l3mvn.world.scenes.semexp import load_split
+
+Net = TypeVar("Net", bound=nn.Module)
 
 
 @dataclass(frozen=True)
@@ -184,7 +188,7 @@ def evaluate(net: PotentialNet, data: SampleSet, cfg: PotentialConfig, batch: in
     }
 
 
-class _Epochs:
+class Epochs(Generic[Net]):
     """A training stage's epochs: each row reported as it comes, with the val scores when there are
     any, and the weights of the epoch whose val ``regret_m`` is least kept to restore."""
 
@@ -193,7 +197,7 @@ class _Epochs:
         self.history: list[dict[str, float]] = []
         self.best: tuple[float, dict[str, torch.Tensor]] | None = None
 
-    def add(self, net: PotentialNet, row: dict[str, float], val: dict[str, float] | None) -> None:
+    def add(self, net: Net, row: dict[str, float], val: dict[str, float] | None) -> None:
         if val is not None:
             row.update({f"val_{k}": v for k, v in val.items() if k not in ("windows", "choices")})
             if self.best is None or row["val_regret_m"] < self.best[0]:
@@ -202,7 +206,7 @@ class _Epochs:
         if self.progress:
             self.progress(json.dumps({k: round(v, 4) if isinstance(v, float) else v for k, v in row.items()}))
 
-    def best_net(self, net: PotentialNet) -> tuple[PotentialNet, list[dict[str, float]]]:
+    def best_net(self, net: Net) -> tuple[Net, list[dict[str, float]]]:
         if self.best is not None:
             net.load_state_dict(self.best[1])
         net.eval()
@@ -227,7 +231,7 @@ def fit(
     opt = torch.optim.AdamW(net.parameters(), lr=options.learning_rate, weight_decay=1e-4)
     steps = options.epochs * max(1, len(train) // options.batch)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=options.learning_rate, total_steps=steps)
-    epochs = _Epochs(progress)
+    epochs = Epochs[PotentialNet](progress)
     for epoch in range(options.epochs):
         net.train()
         order = rng.permutation(len(train))
@@ -340,7 +344,7 @@ def fit_walks(
     sched = torch.optim.lr_scheduler.OneCycleLR(
         opt, max_lr=options.walk_learning_rate, total_steps=options.walk_epochs * batches
     )
-    epochs = _Epochs(progress)
+    epochs = Epochs[PotentialNet](progress)
     for epoch in range(options.walk_epochs + 1):
         started, total = time.monotonic(), 0.0
         if epoch:
