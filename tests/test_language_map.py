@@ -13,6 +13,7 @@ from l3mvn.agent.potentials import OUTPUTS, PotentialModel, PotentialNet, Potent
 from l3mvn.agent.potentials.language_map import (
     LanguageMapHead,
     LanguageResidual,
+    is_language_map,
     map_head_file,
     shipped_language_map,
     window_sentences,
@@ -176,6 +177,9 @@ def test_a_head_saves_loads_and_is_refused_over_another_poni_checkpoint(tmp_path
     (tmp_path / "junk.pt").write_bytes(b"not torch")
     with pytest.raises(L3MVNError, match="cannot read map head"):
         LanguageMapHead.load(tmp_path / "junk.pt", poni)
+    assert not is_language_map(tmp_path / "junk.pt")  # asked again once the file changes, not from memory
+    LanguageMapHead(net, "minilm", file_sha256(poni), {}, "").save(tmp_path / "junk.pt")
+    assert is_language_map(tmp_path / "junk.pt") and map_head_file(str(tmp_path / "junk.pt")) is not None
 
 
 def _error_line(capsys) -> str:

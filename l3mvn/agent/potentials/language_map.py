@@ -18,6 +18,7 @@ another, it is refused) and ``training``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +41,17 @@ def shipped_language_map() -> Path:
 
 
 def is_language_map(path: str | Path) -> bool:
-    """Whether ``path`` is a head file of this kind (a feed-forward head file of another kind is not)."""
+    """Whether ``path`` is a head file of this kind (a feed-forward head file of another kind is not).
+    Asked at every policy build, so a file is read once until it changes."""
+    try:
+        stat = Path(path).stat()
+    except OSError:
+        return False
+    return _is_language_map(str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@lru_cache(maxsize=64)
+def _is_language_map(path: str, mtime_ns: int, size: int) -> bool:
     try:
         blob = torch.load(path, map_location="cpu", weights_only=True)
     except Exception:  # torch raises many kinds for a foreign file; the head loader names the problem
