@@ -35,7 +35,7 @@ from l3mvn.agent.potentials.language_map import (
 from l3mvn.core.config import PotentialConfig
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.paths import file_sha256
-from l3mvn.run.potentials.train import Epochs, TrainOptions, walk_sources, walk_splits
+from l3mvn.run.potentials.train import Epochs, TrainOptions, shuffled_batches, walk_sources, walk_splits
 from l3mvn.run.potentials.walks import WalkSet
 
 # The shipped PONI checkpoint walked procedural houses 0-999: the head learns on houses after them.
@@ -162,9 +162,7 @@ def fit_language_map(
         started, total = time.monotonic(), 0.0
         if epoch:
             net.train()
-            order = rng.permutation(len(train))
-            for b in range(batches):
-                idx = np.sort(order[b * options.batch : (b + 1) * options.batch])
+            for idx in shuffled_batches(rng, len(train), options.batch, batches):
                 loss = list_loss(net, embeddings, train, idx, options.tau_m)
                 opt.zero_grad()
                 loss.backward()

@@ -188,6 +188,14 @@ def evaluate(net: PotentialNet, data: SampleSet, cfg: PotentialConfig, batch: in
     }
 
 
+def shuffled_batches(rng: np.random.Generator, n: int, batch: int, batches: int) -> Iterator[np.ndarray]:
+    """An epoch's ``batches`` batches of up to ``batch`` indices into ``n`` choices, drawn in a fresh
+    order, each sorted (the walks' choices are read in index order)."""
+    order = rng.permutation(n)
+    for b in range(batches):
+        yield np.sort(order[b * batch : (b + 1) * batch])
+
+
 class Epochs(Generic[Net]):
     """A training stage's epochs: each row reported as it comes, with the val scores when there are
     any, and the weights of the epoch whose val ``regret_m`` is least kept to restore."""
@@ -349,9 +357,7 @@ def fit_walks(
         started, total = time.monotonic(), 0.0
         if epoch:
             net.train()
-            order = rng.permutation(len(train))
-            for b in range(batches):
-                idx = np.sort(order[b * options.batch : (b + 1) * options.batch])
+            for idx in shuffled_batches(rng, len(train), options.batch, batches):
                 x = torch.from_numpy(train.features[idx].astype(np.float32) / 255.0)
                 loss = _walk_loss(_turned(net, x, rng), train, idx, cfg, options.walk_tau_m)
                 opt.zero_grad()
