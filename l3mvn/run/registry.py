@@ -148,7 +148,8 @@ def _reads_map_head(name: str, options: PolicyConfig) -> bool:
 
 
 @cache
-def _map_head(file: str, poni_checkpoint: str):  # -> LanguageMapHead (torch loads on first use)
+def _map_head(file: str, version: int, poni_checkpoint: str):  # -> LanguageMapHead (torch loads on first use)
+    """The head at ``file`` as of ``version`` (its mtime: a retrained file is read anew)."""
     from l3mvn.agent.potentials.language_map import LanguageMapHead
 
     return LanguageMapHead.load(file, poni_checkpoint)
@@ -173,7 +174,8 @@ def _map_head_policy(name: str, language: Language, config: Config) -> GlobalPol
     model = _potential_model(config.poni.checkpoint, config.poni)
     file = map_head_file(p.head)
     assert file is not None  # ``_reads_map_head`` said so
-    words = _map_head(str(file), model.source)
+    version = file.stat().st_mtime_ns if file.is_file() else 0  # a missing file: the loader names it
+    words = _map_head(str(file), version, model.source)
     return PotentialPolicy(model, config.poni, config.frontiers.cu_lambda, words, name)
 
 
