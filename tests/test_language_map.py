@@ -224,7 +224,7 @@ def test_the_map_head_refuses_what_it_cannot_honour_before_any_episode(tmp_path,
     assert says in _error_line(capsys) and not out.exists()
 
 
-def test_train_language_refuses_bad_settings_in_one_line(tmp_path, capsys):
+def test_train_language_refuses_bad_settings_in_one_line(tmp_path, capsys, monkeypatch):
     base = ["poni", "train-language", "--walk-procedural-houses", "0", "--workers", "1"]
     assert main([*base, "--out", str(tmp_path / "x.txt")]) == 2
     assert "--out must be a .pt file" in _error_line(capsys)
@@ -232,6 +232,12 @@ def test_train_language_refuses_bad_settings_in_one_line(tmp_path, capsys):
     assert "--learning-rate must be a positive number" in _error_line(capsys)
     assert main([*base, "--out", str(tmp_path / "x.pt")]) == 2
     assert "nothing to walk" in _error_line(capsys) and not (tmp_path / "x.pt").exists()
+    walks = ["--walk-procedural-houses", "1", "--walk-episodes-per-procedural", "1"]
+    from l3mvn.run.potentials import language_map
+
+    monkeypatch.setattr(language_map, "walk_splits", lambda *a, **k: pytest.fail("walked before refusing"))
+    assert main([*base, *walks, "--out", str(tmp_path / "x.pt"), "--encoder", str(tmp_path / "no-model")]) == 2
+    assert "no-model" in _error_line(capsys) and not (tmp_path / "x.pt").exists()  # refused before walking
 
 
 def test_the_shipped_map_head_corrects_the_shipped_poni_and_records_its_scores():

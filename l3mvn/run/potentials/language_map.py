@@ -259,6 +259,9 @@ def run(args: argparse.Namespace) -> int:
         raise L3MVNError(f"--out must be a .pt file in an existing folder, got {out}")
     poni_file = Path(args.poni) if args.poni else shipped_checkpoint()
     poni = PotentialModel.load(poni_file, PotentialConfig(), to_fine_tune=True)
+    from l3mvn.agent.language.models import load_sentence_encoder
+
+    load_sentence_encoder(options.encoder)  # an embedder that cannot load is refused before the walks
     walking = replace(
         TrainOptions(),
         walk_episodes=args.walk_episodes,
