@@ -38,8 +38,8 @@ from l3mvn.core.paths import file_sha256
 from l3mvn.run.potentials.train import Epochs, TrainOptions, shuffled_batches, walk_sources, walk_splits
 from l3mvn.run.potentials.walks import WalkSet
 
-# The shipped PONI checkpoint walked procedural houses 0-999: the head learns on houses after them.
-FIRST_UNWALKED_PROCEDURAL = 1000
+# The shipped PONI checkpoint walked the default procedural houses: the head learns on houses after them.
+FIRST_UNWALKED_PROCEDURAL = TrainOptions.walk_procedural_first + TrainOptions.walk_procedural_houses
 
 
 @dataclass(frozen=True)
