@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 
 from l3mvn.agent.frontiers import Frontier
-from l3mvn.agent.potentials import OUTPUTS, PotentialModel, PotentialNet, PotentialPolicy, objects_hot
+from l3mvn.agent.potentials import CHANNELS, OUTPUTS, PotentialModel, PotentialNet, PotentialPolicy, objects_hot
 from l3mvn.agent.potentials.language_map import (
     LanguageMapHead,
     LanguageResidual,
@@ -24,7 +25,9 @@ from l3mvn.core.config import PotentialConfig
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.paths import file_sha256
 from l3mvn.run.cli import main
-from l3mvn.run.potentials.language_map import LanguageMapOptions, Lists, fit_language_map, regret
+from l3mvn.run.potentials.language_map import LanguageMapOptions, Lists, fit_language_map, prepare, regret
+from l3mvn.run.potentials.train import choice_regret
+from l3mvn.run.potentials.walks import WalkSet
 from tests.test_potentials import CELLS, POLICY_CFG, _model, _potentials, _sem_map
 
 TOILET = GOAL_CATEGORIES.index("toilet")
@@ -151,6 +154,49 @@ def test_fitting_learns_what_the_words_say_and_keeps_poni_where_they_say_nothing
     net, _ = fit_language_map(flat, flat, embeddings, options, log=lambda line: None)
     for param in net.net[2].parameters():
         assert torch.equal(param, torch.zeros_like(param))
+
+
+def _walk_set(metres: np.ndarray, cost: np.ndarray, choices: int) -> WalkSet:
+    """``choices`` choices among the same frontiers (``cost`` (F,), ``metres`` (F, goals)), each with
+    its own random window and size bonuses, every frontier three cells of it."""
+    rng = np.random.default_rng(1)
+    f = len(cost)
+    return WalkSet(
+        rng.integers(0, 256, (choices, len(CHANNELS), 32, 32), dtype=np.uint8),
+        np.full(choices, TOILET, np.int8),
+        np.zeros(choices, np.int16),
+        ["house"] * choices,
+        np.repeat(np.arange(choices, dtype=np.int32), f),
+        np.tile(cost.astype(np.float32), choices),
+        np.tile(metres.astype(np.float32), (choices, 1)),
+        np.repeat(np.arange(choices * f, dtype=np.int32), 3),
+        rng.integers(0, 32 * 32, choices * f * 3).astype(np.int32),
+        rng.uniform(0.0, 3.0, choices * f).astype(np.float32),
+        np.zeros((choices * f, len(GIBSON_CATEGORIES)), bool),
+    )
+
+
+def test_the_heads_regret_at_zero_is_ponis_choice_regret_and_an_off_floor_frontier_counts_worst():
+    torch.manual_seed(3)
+    net = PotentialNet(width=8).eval()
+    poni = PotentialModel(net, {k: float(getattr(POLICY_CFG, k)) for k in GEOMETRY})
+    cost = np.array([1.0, 2.0, 3.5, 0.5])
+    metres = np.random.default_rng(2).uniform(0.5, 9.0, (4, len(GOAL_CATEGORIES)))
+    walks = _walk_set(metres, cost, 6)
+    cfg = replace(POLICY_CFG, size_bonus=True)  # the totals carry the size bonus, as the shipped PONI's do
+    sentences: dict[str, int] = {}
+    lists = prepare(walks, poni, cfg, sentences)
+    zero = LanguageResidual(4, 8)  # the untrained head: PONI's own choices
+    embeddings = torch.zeros(len(sentences), 4)
+    ours, theirs = regret(zero, embeddings, lists), choice_regret(net, walks, cfg)
+    assert ours["regret_m"] == pytest.approx(theirs["regret_m"]) and ours["regret_m"] > 0
+    assert ours["goal_regret_m"] == pytest.approx(theirs["goal_regret_m"])
+    # A frontier off the true floor (no metres on): the worst known total, whatever its travel.
+    lists.true[:, 0, :] = np.nan
+    lists.totals[:] = 10.0
+    lists.totals[:, 0, :] = 0.0  # every choice takes it
+    known = cost[1:, None] + metres[1:]
+    assert regret(zero, embeddings, lists)["regret_m"] == pytest.approx(float((known.max(0) - known.min(0)).mean()))
 
 
 def test_a_head_saves_loads_and_is_refused_over_another_poni_checkpoint(tmp_path):

@@ -35,7 +35,14 @@ from l3mvn.agent.potentials.language_map import (
 from l3mvn.core.config import PotentialConfig
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.paths import file_sha256
-from l3mvn.run.potentials.train import Epochs, TrainOptions, shuffled_batches, walk_sources, walk_splits
+from l3mvn.run.potentials.train import (
+    Epochs,
+    TrainOptions,
+    frontier_logits,
+    shuffled_batches,
+    walk_sources,
+    walk_splits,
+)
 from l3mvn.run.potentials.walks import WalkSet
 
 # The shipped PONI checkpoint walked the default procedural houses: the head learns on houses after them.
@@ -85,11 +92,11 @@ def prepare(walks: WalkSet, poni: PotentialModel, cfg: PotentialConfig, sentence
     )
     for start in range(0, n, 32):
         idx = np.arange(start, min(start + 32, n))
-        x = torch.from_numpy(walks.features[idx].astype(np.float32) / 255.0)
-        predicted = torch.sigmoid(poni.net(x)).reshape(len(idx), len(OUTPUTS), -1).numpy().astype(np.float64)
+        logits = poni.net(torch.from_numpy(walks.features[idx].astype(np.float32) / 255.0))
         for s, i in enumerate(idx):
             cost, metres, cells = walks.frontiers(int(i))
-            potentials = np.array([predicted[s][:, c].max(axis=1) if len(c) else np.zeros(len(OUTPUTS)) for c in cells])
+            per_frontier, _ = frontier_logits(logits[s].reshape(len(OUTPUTS), -1), cells)
+            potentials = torch.sigmoid(per_frontier).numpy().astype(np.float64)
             f = len(cost)
             out.totals[i, :f] = expected_totals(cost.astype(np.float64), potentials, cfg, walks.size_m(int(i)))
             out.true[i, :f] = cost[:, None] + metres
@@ -122,8 +129,11 @@ def list_loss(
 
 @torch.inference_mode()
 def regret(net: LanguageResidual, embeddings: torch.Tensor, lists: Lists) -> dict[str, float]:
-    """The PONI walks' stage's measure (``train.choice_regret``) for PONI's totals plus the head's
-    metres: ``regret_m`` over every goal the house holds, ``goal_regret_m`` for the episode's goal."""
+    """Mean regret in metres of the choice by PONI's totals plus the head's metres: the true total
+    (travel + metres on) of the frontier taken, less the least; ``regret_m`` over every goal the house
+    holds, ``goal_regret_m`` for the episode's goal. Where every frontier lies on the true floor this is
+    ``train.choice_regret``; a frontier off it counts here as the worst known total (there: its own
+    travel plus the worst known metres on)."""
     idx = np.arange(len(lists))
     words = net(embeddings[torch.from_numpy(lists.sentence)]).numpy().astype(np.float64)
     totals = np.where(lists.frontier[:, :, None], lists.totals + words, np.inf)

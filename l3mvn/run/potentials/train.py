@@ -259,7 +259,7 @@ def fit(
 
 
 # --- the second stage: the choices of the agent's own walks ------------------------------------------------
-def _frontier_logits(logits: torch.Tensor, cells: list[np.ndarray]) -> tuple[torch.Tensor, np.ndarray]:
+def frontier_logits(logits: torch.Tensor, cells: list[np.ndarray]) -> tuple[torch.Tensor, np.ndarray]:
     """(F, len(OUTPUTS)) logits of each frontier's best cell out of one window's (len(OUTPUTS), n*n),
     and which frontiers have a cell in the window (the others read potential 0, as in the policy)."""
     inside = np.array([len(c) > 0 for c in cells])
@@ -277,7 +277,7 @@ def _walk_loss(
     n_point = n_lists = 0
     for s, i in enumerate(idx):
         cost, metres, cells = walks.frontiers(int(i))
-        per_frontier, inside = _frontier_logits(logits[s].reshape(len(OUTPUTS), -1), cells)
+        per_frontier, inside = frontier_logits(logits[s].reshape(len(OUTPUTS), -1), cells)
         known = np.isfinite(metres) & inside[:, None]
         mask = torch.from_numpy(known)
         target = torch.from_numpy(np.clip(1.0 - np.nan_to_num(metres) / cfg.range_m, 0.0, 1.0).astype(np.float32))
@@ -314,7 +314,7 @@ def choice_regret(net: PotentialNet, walks: WalkSet, cfg: PotentialConfig, batch
         logits = net(torch.from_numpy(walks.features[idx].astype(np.float32) / 255.0))
         for s, i in enumerate(idx):
             cost, metres, cells = walks.frontiers(int(i))
-            per_frontier, _ = _frontier_logits(logits[s].reshape(len(OUTPUTS), -1), cells)
+            per_frontier, _ = frontier_logits(logits[s].reshape(len(OUTPUTS), -1), cells)
             size = walks.size_m(int(i)).astype(np.float64)
             totals = expected_totals(cost.astype(np.float64), torch.sigmoid(per_frontier).numpy(), cfg, size)
             for g in range(metres.shape[1]):
