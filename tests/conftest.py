@@ -188,3 +188,16 @@ def strict_rerun():
     rr.set_strict_mode(True)
     yield
     rr.set_strict_mode(before)
+
+
+@pytest.fixture(scope="module")
+def one_torch_thread():
+    """For modules of tiny nets (``pytestmark = pytest.mark.usefixtures("one_torch_thread")``): on busy
+    cores torch's worker threads wait on each other far longer than they compute (a 3-epoch fit takes
+    about a second with one thread, over twenty with two)."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

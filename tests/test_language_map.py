@@ -33,12 +33,7 @@ from tests.test_potentials import CELLS, POLICY_CFG, _model, _potentials, _sem_m
 TOILET = GOAL_CATEGORIES.index("toilet")
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # tiny nets: see conftest
 
 
 def _poni_file(tmp_path, cfg: PotentialConfig = PotentialConfig()) -> tuple[PotentialModel, str]:

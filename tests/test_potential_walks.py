@@ -25,12 +25,7 @@ SMALL = PotentialConfig(input_window_m=6.4)  # 32 network cells a side
 FRAME = (60, 80)
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # tiny nets: see conftest
 
 
 @pytest.fixture(scope="module")

@@ -46,14 +46,7 @@ SMALL = PotentialConfig(input_window_m=6.4)
 QUICK_REVEAL = RevealOptions(max_views=4, rays=180)
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_torch_thread():
-    """These nets are tiny: on busy cores torch's worker threads wait on each other far longer than
-    they compute (a 3-epoch fit takes about a second with one thread, over twenty with two)."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # tiny nets: see conftest
 
 
 def _one_line_error(call, *args, **kwargs) -> str:
