@@ -17,8 +17,11 @@ from l3mvn.agent.decision import Decision
 from l3mvn.agent.mapping import SemanticMap
 from l3mvn.agent.modular import MapAgent
 from l3mvn.agent.policies.global_policies import CostUtility
+from l3mvn.core.camera import CameraIntrinsics, depth_to_points
 from l3mvn.core.config import Config, SimConfig, TaskConfig
 from l3mvn.core.errors import L3MVNError
+from l3mvn.core.frames import CameraFrame
+from l3mvn.core.grid import disk
 from l3mvn.core.types import Action, EpisodeBrief, Observation, Pose
 from l3mvn.run.session import EpisodeSession
 from l3mvn.world.episode import Episode
@@ -166,3 +169,77 @@ def test_measure_settings_out_of_range_are_refused_in_one_line():
     for name in ("confirm_min_cells", "view_rows"):
         with pytest.raises(L3MVNError, match=f"{name} must be >= 1"):
             TaskConfig(**{name: 0})
+
+
+def _reference_record(seen_floor, goal_seen, obs, pose, config, scene):
+    """The task's record of one frame as whole-array numpy: the points of the camera's own
+    back-projection, marked as the module docstring of ``views`` describes (the kernel's reference)."""
+    depth, semantic, tilt, res = obs.frame.depth, obs.frame.semantic, obs.tilt, scene.resolution_m
+    intrinsics = CameraIntrinsics.from_sim(config.sim, *depth.shape)
+    valid = np.isfinite(depth) & (depth > 0) & (depth < config.sim.max_depth_m)
+    cloud = depth_to_points(np.where(valid, depth, 0.0).astype(np.float32), intrinsics, pose, tilt)
+    points = np.full((*depth.shape, 3), np.nan, dtype=np.float32)
+    points[valid] = cloud.points
+    floor = valid.copy()
+    floor[valid] = cloud.points[:, 2] < config.sim.max_climb_m
+
+    def mark(grid, xy):
+        rows, cols = np.floor(xy[:, 1] / res).astype(np.int64), np.floor(xy[:, 0] / res).astype(np.int64)
+        ok = (rows >= 0) & (rows < grid.shape[0]) & (cols >= 0) & (cols < grid.shape[1])
+        grid[rows[ok], cols[ok]] = True
+
+    def between(a, b):
+        length = np.hypot(b[:, 0] - a[:, 0], b[:, 1] - a[:, 1])
+        a, b, length = a[length > res / 2], b[length > res / 2], length[length > res / 2]
+        count = np.ceil(length / (res / 2)).astype(np.int64)
+        seg = np.repeat(np.arange(len(a)), count - 1)
+        k = np.arange(len(seg)) - np.repeat(np.cumsum(count - 1) - (count - 1), count - 1) + 1
+        t = (k / count[seg])[:, None].astype(np.float32)
+        return a[seg] + t * (b[seg] - a[seg])
+
+    mark(seen_floor, points[floor])
+    reach = np.hypot(points[..., 0] - pose.x, points[..., 1] - pose.y)
+    wall = np.where(valid & ~floor, reach, np.inf)
+    has_wall = np.isfinite(wall).any(axis=0)
+    row = np.where(has_wall, wall.argmin(axis=0), np.where(floor, reach, -1.0).argmax(axis=0))
+    columns = np.flatnonzero(has_wall | floor.any(axis=0))
+    end = points[row[columns], columns, :2]
+    start = np.empty_like(end)
+    start[:, 0], start[:, 1] = pose.x, pose.y
+    mark(seen_floor, np.concatenate([start, between(start, end)]))
+    pairs = floor[:-1] & floor[1:]
+    mark(seen_floor, between(points[:-1, :, :2][pairs], points[1:, :, :2][pairs]))
+    radius = int(math.floor(config.sim.agent_radius_m / res + 1e-9))
+    body = np.argwhere(disk(radius)) - radius + scene.cell_of(pose.x, pose.y)
+    seen_floor[body[:, 0], body[:, 1]] = True
+    if obs.goal in obs.categories:
+        mark(goal_seen, points[valid & (semantic == obs.goal_id)])
+
+
+def test_the_compiled_record_marks_the_cells_of_the_cameras_own_back_projection(tiny_scene):
+    """Frames from both rooms, level and tilted, one of them with depths a sensor reports as nothing
+    (NaN, 0, beyond range): every frame marks exactly the cells the array reference marks."""
+    config = Config(sim=SimConfig().with_frame(120, 160))
+    env = BuiltinSimulator(tiny_scene, config.sim)
+    record = ViewRecord(tiny_scene, config)
+    floor, goal = np.zeros_like(record.seen_floor), np.zeros_like(record.goal_seen)
+    rng = np.random.default_rng(0)
+    walkable = np.argwhere(tiny_scene.walkable)
+    for k in range(24):
+        r, c = walkable[rng.integers(len(walkable))]
+        x, y = tiny_scene.cell_center(r, c)
+        pose = Pose(float(x), float(y), float(rng.uniform(-math.pi, math.pi)))  # as the simulator gives it
+        tilt = (0.0, -math.pi / 6)[k % 2]
+        obs = _frame(env, pose, tilt)
+        if k == 5:
+            depth = obs.frame.depth.copy()
+            depth[rng.random(depth.shape) < 0.1] = np.nan
+            depth[rng.random(depth.shape) < 0.1] = 0.0
+            depth[rng.random(depth.shape) < 0.1] = config.sim.max_depth_m + 1.0
+            obs = dataclasses.replace(obs, frame=CameraFrame.of(obs.frame.rgb, depth, obs.frame.semantic))
+        before = record.seen_floor.sum()
+        record.add(obs, pose)
+        _reference_record(floor, goal, obs, pose, config, tiny_scene)
+        assert np.array_equal(record.seen_floor, floor) and np.array_equal(record.goal_seen, goal), k
+        assert record.seen_floor.sum() >= before
+    assert goal.any() and floor.sum() > 1000  # the toilet was in view, and much floor

@@ -97,7 +97,7 @@ def too_near_points(
     never lies in front of it; the floor in between stays as it was, unknown or seen.
     """
     _check_frame(depth, None, intrinsics)
-    _, _, rise_per_m = _ray_factors(intrinsics, tilt)
+    _, _, rise_per_m = ray_factors(intrinsics, tilt)
     with np.errstate(divide="ignore"):
         floor_depth = np.where(rise_per_m < 0, intrinsics.camera_height_m / -rise_per_m, np.inf)
     floor_in_range = (floor_depth >= min_depth_m) & (floor_depth < max_depth_m)
@@ -108,7 +108,7 @@ def too_near_points(
     return _back_project(np.full(int(invalid.sum()), min_depth_m, np.float32), invalid, intrinsics, pose, tilt)
 
 
-def _ray_factors(intrinsics: CameraIntrinsics, tilt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def ray_factors(intrinsics: CameraIntrinsics, tilt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per column: rightward offset per metre of depth; per row: forward reach and height gain per
     metre of depth once pitched by ``tilt``."""
     f = intrinsics.focal_px
@@ -121,7 +121,7 @@ def _ray_factors(intrinsics: CameraIntrinsics, tilt: float) -> tuple[np.ndarray,
 
 def _back_project(d: np.ndarray, mask: np.ndarray, intrinsics: CameraIntrinsics, pose: Pose, tilt: float) -> np.ndarray:
     """World points of the pixels in ``mask`` (row-major order) at depths ``d``."""
-    right, forward_per_m, rise_per_m = _ray_factors(intrinsics, tilt)
+    right, forward_per_m, rise_per_m = ray_factors(intrinsics, tilt)
     # Boolean selection of broadcast row/column factors: cheaper than gathering by pixel index.
     ahead = d * np.broadcast_to(forward_per_m[:, None], mask.shape)[mask]
     rightward = d * np.broadcast_to(right[None, :], mask.shape)[mask]

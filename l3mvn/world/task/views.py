@@ -14,16 +14,21 @@ coverage) at the pose the simulator placed the agent, onto the scene's own grid.
   and the cells under the agent's body.
 * Goal seen: cells where a pixel of the goal category met a surface within the sensor's range;
   ``confirmed`` once the largest 8-connected group of them has ``TaskConfig.confirm_min_cells`` cells.
+
+The record is taken at every step of every episode, so one compiled pass over the frame marks the
+cells directly (no array of points per frame); its arithmetic is the camera's float32 back-projection
+(``l3mvn.core.camera``) step for step, so it marks the cells that projection gives.
 """
 
 from __future__ import annotations
 
 import math
 
+import numba as nb
 import numpy as np
 from scipy import ndimage as ndi
 
-from l3mvn.core.camera import CameraIntrinsics, depth_to_points
+from l3mvn.core.camera import CameraIntrinsics, ray_factors
 from l3mvn.core.config import Config
 from l3mvn.core.grid import disk
 from l3mvn.core.types import Observation, Pose
@@ -53,20 +58,26 @@ class ViewRecord:
         intrinsics = self._intrinsics
         if intrinsics is None or (intrinsics.height, intrinsics.width) != depth.shape:
             intrinsics = self._intrinsics = CameraIntrinsics.from_sim(self.config.sim, *depth.shape)
-        valid = np.isfinite(depth) & (depth > 0) & (depth < self.config.sim.max_depth_m)
-        cloud = depth_to_points(np.where(valid, depth, 0.0).astype(np.float32), intrinsics, pose, obs.tilt)
-        points = np.full((*depth.shape, 3), np.nan, dtype=np.float32)
-        points[valid] = cloud.points
-        floor = valid.copy()
-        floor[valid] = cloud.points[:, 2] < self.config.sim.max_climb_m
-        self._mark(self.seen_floor, points[floor])
-        self._mark(self.seen_floor, _up_to_first_surface(points, valid, floor, pose, self.scene.resolution_m / 2))
-        pairs = floor[:-1] & floor[1:]  # vertically neighbouring pixels that both met the floor
-        flat = points[..., :2]  # the marks are cells of the floor plane
-        self._mark(self.seen_floor, _between(flat[:-1][pairs], flat[1:][pairs], self.scene.resolution_m / 2))
+        right, forward, rise = ray_factors(intrinsics, obs.tilt)
+        f32 = np.float32
+        res = self.scene.resolution_m
+        _record_frame(
+            np.ascontiguousarray(depth, dtype=np.float32),
+            np.ascontiguousarray(semantic, dtype=np.int32),
+            obs.goal_id if obs.goal in obs.categories else -1,
+            right,
+            forward,
+            rise,
+            np.array([pose.x, pose.y, math.cos(pose.heading), math.sin(pose.heading)], dtype=np.float32),
+            f32(intrinsics.camera_height_m),
+            f32(self.config.sim.max_depth_m),
+            f32(self.config.sim.max_climb_m),
+            f32(res),
+            f32(res / 2),
+            self.seen_floor,
+            self.goal_seen,
+        )
         self._mark_body(pose)
-        if obs.goal in obs.categories:
-            self._mark(self.goal_seen, points[valid & (semantic == obs.goal_id)])
 
     def coverage(self, rows: np.ndarray, cols: np.ndarray) -> float:
         """The share of the cells (``rows``, ``cols``) whose floor was seen."""
@@ -80,15 +91,6 @@ class ViewRecord:
         labels, n = ndi.label(self.goal_seen, structure=_EIGHT)
         return int(np.bincount(labels.ravel())[1:].max()) >= self.config.task.confirm_min_cells
 
-    def _mark(self, grid: np.ndarray, points: np.ndarray) -> None:
-        if not len(points):
-            return
-        res, (h, w) = self.scene.resolution_m, grid.shape
-        rows = np.floor(points[:, 1] / res).astype(np.int64)
-        cols = np.floor(points[:, 0] / res).astype(np.int64)
-        ok = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
-        grid[rows[ok], cols[ok]] = True
-
     def _mark_body(self, pose: Pose) -> None:
         cells = self._body + self.scene.cell_of(pose.x, pose.y)
         h, w = self.scene.shape
@@ -96,35 +98,90 @@ class ViewRecord:
         self.seen_floor[cells[ok, 0], cells[ok, 1]] = True
 
 
-def _up_to_first_surface(
-    points: np.ndarray, valid: np.ndarray, floor: np.ndarray, pose: Pose, spacing_m: float
-) -> np.ndarray:
-    """Floor points (x, y) every ``spacing_m`` from the agent along each pixel column, up to the
-    nearest point of the column that is not floor, or (none) to its farthest floor point."""
-    reach = np.hypot(points[..., 0] - pose.x, points[..., 1] - pose.y)
-    wall = np.where(valid & ~floor, reach, np.inf)
-    far = np.where(floor, reach, -1.0)
-    has_wall = np.isfinite(wall).any(axis=0)
-    row = np.where(has_wall, wall.argmin(axis=0), far.argmax(axis=0))  # the point that ends the column
-    columns = np.flatnonzero(has_wall | floor.any(axis=0))
-    if not len(columns):
-        return np.empty((0, 2), np.float32)
-    end = points[row[columns], columns, :2]
-    start = np.empty_like(end)
-    start[:, 0], start[:, 1] = pose.x, pose.y
-    return np.concatenate([start, _between(start, end, spacing_m)])
+@nb.njit(cache=True)
+def _record_frame(
+    depth,
+    semantic,
+    goal_id,
+    right,
+    forward,
+    rise,
+    pose,
+    camera_height,
+    max_depth,
+    max_climb,
+    res,
+    spacing,
+    floor_grid,
+    goal_grid,
+):
+    """Mark the floor (``floor_grid``) and, with ``goal_id`` >= 0, the goal (``goal_grid``) that one
+    frame shows; ``pose`` is (x, y, cos heading, sin heading), every number float32 as the camera's."""
+    h, w = depth.shape
+    x0, y0, ch, sh = pose[0], pose[1], pose[2], pose[3]
+    px = np.empty((h, w), np.float32)
+    py = np.empty((h, w), np.float32)
+    valid = np.zeros((h, w), np.bool_)
+    floor = np.zeros((h, w), np.bool_)
+    for r in range(h):
+        for c in range(w):
+            d = depth[r, c]
+            if not (np.isfinite(d) and d > 0 and d < max_depth):
+                continue
+            ahead = d * forward[r]
+            rightward = d * right[c]
+            x = x0 + ahead * ch + rightward * sh
+            y = y0 + ahead * sh - rightward * ch
+            px[r, c], py[r, c] = x, y
+            valid[r, c] = True
+            if camera_height + d * rise[r] < max_climb:
+                floor[r, c] = True
+                _mark(floor_grid, x, y, res)
+            if goal_id >= 0 and semantic[r, c] == goal_id:
+                _mark(goal_grid, x, y, res)
+    # Along each column, the floor up to the first surface that is not floor (or its farthest floor).
+    for c in range(w):
+        end, end_reach, is_wall = -1, np.float32(0.0), False
+        for r in range(h):
+            if not valid[r, c]:
+                continue
+            reach = _length(px[r, c] - x0, py[r, c] - y0)
+            if not floor[r, c]:
+                if not is_wall or reach < end_reach:
+                    end, end_reach, is_wall = r, reach, True
+            elif not is_wall and (end < 0 or reach > end_reach):
+                end, end_reach = r, reach
+        if end >= 0:
+            _mark(floor_grid, x0, y0, res)
+            _mark_between(floor_grid, x0, y0, px[end, c], py[end, c], res, spacing)
+    # The floor between vertically neighbouring pixels that both met it (seen over a low obstacle).
+    for r in range(h - 1):
+        for c in range(w):
+            if floor[r, c] and floor[r + 1, c]:
+                _mark_between(floor_grid, px[r, c], py[r, c], px[r + 1, c], py[r + 1, c], res, spacing)
 
 
-def _between(a: np.ndarray, b: np.ndarray, spacing_m: float) -> np.ndarray:
-    """Points (x, y) every ``spacing_m`` along each segment a[i] -> b[i] of the floor plane (a and b:
-    (N, 2) x, y), endpoints excluded: only the segments longer than the spacing need any."""
-    length = np.hypot(b[:, 0] - a[:, 0], b[:, 1] - a[:, 1])
-    long = length > spacing_m
-    if not long.any():
-        return np.empty((0, 2), np.float32)
-    a, b, length = a[long], b[long], length[long]
-    count = np.ceil(length / spacing_m).astype(np.int64)
-    seg = np.repeat(np.arange(len(a)), count - 1)
-    k = np.arange(len(seg)) - np.repeat(np.cumsum(count - 1) - (count - 1), count - 1) + 1
-    t = (k / count[seg])[:, None].astype(np.float32)
-    return a[seg] + t * (b[seg] - a[seg])
+@nb.njit(cache=True)
+def _length(dx, dy):
+    """float32 hypot as libm's hypotf rounds it: the exact length in double precision, rounded once."""
+    return np.float32(math.sqrt(np.float64(dx) * np.float64(dx) + np.float64(dy) * np.float64(dy)))
+
+
+@nb.njit(cache=True)
+def _mark(grid, x, y, res):
+    row, col = math.floor(y / res), math.floor(x / res)
+    if 0 <= row < grid.shape[0] and 0 <= col < grid.shape[1]:
+        grid[row, col] = True
+
+
+@nb.njit(cache=True)
+def _mark_between(grid, ax, ay, bx, by, res, spacing):
+    """Mark the points every ``spacing`` along a -> b, endpoints excluded (none when shorter)."""
+    dx, dy = bx - ax, by - ay
+    length = _length(dx, dy)
+    if not length > spacing:
+        return
+    count = math.ceil(length / spacing)
+    for k in range(1, count):
+        t = np.float32(k / count)
+        _mark(grid, ax + t * dx, ay + t * dy, res)
