@@ -624,3 +624,18 @@ def test_closed_loop_agent_gets_around_an_obstacle_missing_from_its_map():
 def test_a_body_no_step_can_sweep_is_refused_in_one_line(body, step):
     with pytest.raises(L3MVNError, match=r"need body_radius_m >= 0 and forward_step_m > 0, got"):
         LocalPlanner(PlannerConfig(), RES, body_radius_m=body, forward_step_m=step)
+
+
+def test_the_narrow_field_is_marched_only_where_it_could_win():
+    """A clear way as short as the straight line leaves the narrow way nothing to win: one march.
+    Where the clear way goes round, the narrow field is marched and compared (the gap above)."""
+    straight = LocalPlanner.for_sim(PlannerConfig(), RES, SIM)
+    plan = straight.plan(_room(), (60, 30), 0.0, (60, 100))
+    assert plan.reachable and straight.fmm_runs == 1
+    obstacle = _room()
+    obstacle[:, 60] = True
+    obstacle[59:62, 60] = False  # only the body fits: the clear way goes round through rows 100-110
+    obstacle[100:111, 60] = False
+    round_about = LocalPlanner.for_sim(PlannerConfig(), RES, SIM)
+    round_about.plan(obstacle, (60, 30), 0.0, (60, 100))
+    assert round_about.fmm_runs >= 2

@@ -106,7 +106,8 @@ class GoalFields:
         The way keeps ``clearance_cells`` more from obstacles (a path along the body's own margin
         grazes walls at every heading error) unless that closes it or lengthens it by more than
         ``clearance_detour_m``: then the body's margin alone is used until the goal changes or the
-        marks are cleared. The comparison is made whenever the wide field is replanned."""
+        marks are cleared. The comparison is made whenever the wide field is replanned; the narrow
+        field is marched for it only while the straight line to the goal leaves it room to win."""
         goal = (goal_rows.tobytes(), goal_cols.tobytes(), dilation)
         args = (obstacle, agent, goal_rows, goal_cols, nearest_goal, dilation, marks)
         if self.cfg.clearance_cells == 0 or goal == self._narrow_goal:
@@ -114,8 +115,15 @@ class GoalFields:
         wide = self._field_to(*args, True)
         if not wide[3]:
             return wide
+        d_wide = float(wide[0].at(*agent))
+        # No way, however narrow, is shorter than the straight line to the dilated goal: when the wide
+        # way is within the detour of it, the narrow field could not win and is not marched.
+        straight = max(float(np.hypot(goal_rows - agent[0], goal_cols - agent[1]).min()) - dilation, 0.0)
+        straight *= self.resolution_m
+        if math.isfinite(d_wide) and not straight - _slack(straight) + self.cfg.clearance_detour_m < d_wide:
+            return wide
         narrow = self._field_to(*args, False)
-        d_wide, d_narrow = float(wide[0].at(*agent)), float(narrow[0].at(*agent))
+        d_narrow = float(narrow[0].at(*agent))
         if math.isfinite(d_wide) and not d_narrow + self.cfg.clearance_detour_m < d_wide:
             return wide
         if marks:
