@@ -8,6 +8,7 @@ may reach outside: a ``..``, an absolute path or a separator in a name would rea
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path, PurePath
 
 from l3mvn.core.errors import L3MVNError
@@ -16,6 +17,12 @@ from l3mvn.core.errors import L3MVNError
 PACKAGE_DATA = Path(__file__).resolve().parents[1] / "data"
 # Where a source checkout finds the project's shared research data: ``<repo>/../shared``.
 SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
+CACHE_ENV = "L3MVN_CACHE"  # overrides the cache folder (default ~/.cache/l3mvn)
+
+
+def cache_root() -> Path:
+    """The folder of what is derived once and kept (converted LLMs and their scores, decoded maps)."""
+    return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "l3mvn")
 
 
 def plain_name(value: object, what: str, example: str) -> str:

@@ -31,15 +31,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from l3mvn.core.errors import L3MVNError, first_line
-from l3mvn.core.paths import file_sha256
+from l3mvn.core.paths import cache_root, file_sha256
 from l3mvn.core.writing import write_file
 
 if TYPE_CHECKING:
     from transformers import PreTrainedModel, PreTrainedTokenizerBase
 
 log = logging.getLogger(__name__)
-
-CACHE_ENV = "L3MVN_CACHE"  # overrides the cache folder (default ~/.cache/l3mvn)
 
 
 @dataclass(frozen=True)
@@ -89,10 +87,6 @@ class LoadedLLM:
     tokenizer: PreTrainedTokenizerBase
     model: PreTrainedModel
     folder: Path  # the converted model's folder (score caches live beside it)
-
-
-def cache_root() -> Path:
-    return Path(os.environ.get(CACHE_ENV) or Path.home() / ".cache" / "l3mvn")
 
 
 def installed_llms() -> tuple[str, ...]:

@@ -15,6 +15,7 @@ from l3mvn.core.categories import GIBSON_CATEGORIES
 from l3mvn.core.errors import L3MVNError, show_value
 from l3mvn.core.paths import plain_name
 from l3mvn.core.writing import write_file
+from l3mvn.world.scenes.decoded_maps import decoded
 from l3mvn.world.scenes.map_pickle import load_map_pickle
 from l3mvn.world.scenes.scene import SceneMap
 
@@ -59,10 +60,10 @@ def info_path(dataset: str | Path, split: str) -> Path:
 
 
 def read_info(path: Path) -> object:
-    """The raw ``{scene: {floor: record}}`` of a ``.pbz2`` file, read without executing anything."""
+    """The raw ``{scene: {floor: record}}`` of a ``.pbz2`` file, read without executing anything (its
+    decoded copy when one is kept: ``decoded_maps``)."""
     try:
-        with bz2.BZ2File(path) as fh:
-            return load_map_pickle(fh)
+        return decoded(path, lambda: _decode_info(path))
     except pickle.UnpicklingError as exc:
         raise L3MVNError(f"{path} is not a SemExp map file ({' '.join(str(exc).split())})") from None
     except (
@@ -79,6 +80,11 @@ def read_info(path: Path) -> object:
         MemoryError,
     ) as exc:
         raise L3MVNError(f"{path} is corrupt or truncated ({type(exc).__name__}: {show_value(str(exc))})") from None
+
+
+def _decode_info(path: Path) -> object:
+    with bz2.BZ2File(path) as fh:
+        return load_map_pickle(fh)
 
 
 def load_split(dataset: str | Path, split: str, **scene_kwargs) -> dict[str, dict[int, SceneMap]]:
