@@ -102,8 +102,11 @@ def test_a_copy_that_cannot_be_read_is_decoded_again_and_rewritten(tmp_path, mon
     value = {"A": {0: {"sem_map": np.ones((2, 3, 3))}}}
     _write(path, value)
     read_info(path)
-    decoded_maps.cache_file(path).write_bytes(b"not a zip file")
-    assert _same(read_info(path), value)
+    kept = decoded_maps.cache_file(path)
+    whole = kept.read_bytes()
+    for broken in (b"not a zip file", whole[: len(whole) // 2], whole[:-30]):
+        kept.write_bytes(broken)
+        assert _same(read_info(path), value)
     _undecodable(monkeypatch)
     assert _same(read_info(path), value)
 

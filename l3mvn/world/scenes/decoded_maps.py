@@ -7,16 +7,17 @@ houses that is most of a short command's start-up. The decoded value is kept as 
 ``cache_root()/maps/<SHA-256 of the file>.npz``, so a file that was edited or replaced is never read
 from an old copy, and ``np.load`` reads it without pickle: nothing in the cache runs. Arrays that hold
 only 0 and 1 (the category maps) are kept as bits. Small files (a few houses) decode in a blink and
-get no copy. A value the cache could not give back exactly
-(anything but nested dicts of arrays, numbers and strings) is not kept; a copy that cannot be written
-(a full disk, a read-only home) costs only the decoding, with one warning line, and a copy that
-cannot be read is decoded again and rewritten.
+get no copy. A value the cache could not give back exactly (anything but nested dicts of arrays,
+numbers and strings) is not kept; a copy that cannot be written (a full disk, a read-only home) costs
+only the decoding, with one warning line, and a copy that cannot be read is decoded again and
+rewritten.
 """
 
 from __future__ import annotations
 
 import json
 import warnings
+import zipfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -49,12 +50,12 @@ def decoded(path: Path, decode: Callable[[], Any]) -> Any:
     if kept is not None:
         return kept
     value = decode()
+    if _nbytes(value) < _MIN_BYTES:
+        return value
     arrays: dict[str, Any] = {}
     try:
         manifest = {"version": _VERSION, "value": _encode(value, arrays)}
     except _Unfit:
-        return value
-    if _nbytes(value) < _MIN_BYTES:
         return value
     arrays[_MANIFEST] = np.frombuffer(json.dumps(manifest).encode(), np.uint8)
     try:
@@ -74,7 +75,7 @@ def _read(target: Path) -> Any | None:
             if not isinstance(manifest, dict) or manifest.get("version") != _VERSION:
                 return None
             return _decode(manifest["value"], stored)
-    except (OSError, ValueError, KeyError, TypeError, IndexError, EOFError):
+    except (OSError, ValueError, KeyError, TypeError, IndexError, EOFError, zipfile.BadZipFile):
         return None  # absent, truncated, another layout: decoded again and rewritten
 
 
@@ -98,7 +99,7 @@ def _encode(value: Any, arrays: dict[str, Any]) -> Any:
 
 
 def _nbytes(value: Any) -> int:
-    """The bytes of the arrays in ``value`` (an encodable one), as decoded."""
+    """The bytes of the arrays in ``value``'s dicts."""
     if type(value) is dict:
         return sum(_nbytes(v) for v in value.values())
     return value.nbytes if type(value) is np.ndarray else 0
