@@ -13,6 +13,7 @@ from l3mvn.core.camera import CameraIntrinsics, depth_to_points, downsample_fram
 from l3mvn.core.config import MapConfig, SimConfig
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.types import Pose
+from l3mvn.world.sim.simulator import BuiltinSimulator
 
 H, W = 120, 160
 SIM = SimConfig()
@@ -388,3 +389,55 @@ def test_downsample_frame_keeps_the_centre_pixel_of_each_block():
     small, sem = downsample_frame(depth, depth.astype(np.int32), 4)
     assert small.shape == (120, 160) and sem.shape == (120, 160)
     assert small[1, 1] == depth[6, 6]
+
+
+class _ArraySplat(SemanticMapper):
+    """The mapper with the whole-array ``_splat`` the compiled pass replaced: its reference."""
+
+    def _splat(self, points, labels, x, y):
+        cfg, size = self.cfg, self.cfg.map_cells
+        half = size // 2
+        cols = np.floor(points[:, 0] / cfg.resolution_m).astype(np.int64) + half
+        rows = np.floor(points[:, 1] / cfg.resolution_m).astype(np.int64) + half
+        z = points[:, 2]
+        keep = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size) & (z >= cfg.floor_min_height_m)
+        flat, z, labels = rows[keep] * size + cols[keep], z[keep], labels[keep]
+        near = np.hypot(points[keep, 0] - x, points[keep, 1] - y) <= cfg.look_distance_m
+        below_top, high = z <= self.obstacle_max_height_m, z >= cfg.obstacle_min_height_m
+        self._explored.reshape(-1)[flat[below_top]] = True
+        self._looked.reshape(-1)[flat[below_top & near]] = True
+        self._obstacle.reshape(-1)[flat[below_top & high]] = True
+        labelled = (labels > 0) & (z <= cfg.category_max_height_m)
+        if labelled.any():
+            cells, hits = np.unique(
+                (labels[labelled].astype(np.int64) - 1) * size * size + flat[labelled], return_counts=True
+            )
+            counts = self._counts.reshape(-1)
+            total = np.minimum(counts[cells].astype(np.int64) + hits, cfg.category_point_threshold)
+            counts[cells] = total
+            self._categories.reshape(-1)[cells[total >= cfg.category_point_threshold]] = True
+        return flat[below_top & high], flat[~high]
+
+
+def test_the_compiled_splat_maps_what_the_array_code_maps(tiny_scene):
+    """A walk round both rooms of the two-room house, level and tilted: after every frame each grid
+    (obstacles, guesses, explored, looked, categories and their point counts) is the reference's."""
+    sim = SimConfig().with_frame(H, W)
+    env = BuiltinSimulator(tiny_scene, sim)
+    start = Pose(2.5, 2.0, 0.0)
+    mappers = [cls.for_sim(MapConfig(), sim, H, W, tiny_scene.categories) for cls in (SemanticMapper, _ArraySplat)]
+    for mapper in mappers:
+        mapper.reset(start)
+    rng = np.random.default_rng(3)
+    walkable = np.argwhere(tiny_scene.walkable)
+    for k in range(20):
+        x, y = tiny_scene.cell_center(*walkable[rng.integers(len(walkable))])
+        pose = Pose(float(x), float(y), float(rng.uniform(-math.pi, math.pi)))
+        tilt = (0.0, -math.pi / 6)[k % 2]
+        depth, semantic = env.renderer.render(pose, tilt).strided(1)
+        for mapper in mappers:
+            mapper.update(depth, semantic, pose, tilt)
+        compiled, reference = mappers
+        for name in ("_obstacle", "_inferred", "_explored", "_looked", "_categories", "_counts"):
+            assert np.array_equal(getattr(compiled, name), getattr(reference, name)), (k, name)
+    assert compiled._categories.any() and compiled._obstacle.any()

@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import overload
 
+import numba as nb
 import numpy as np
 import numpy.typing as npt
 
@@ -303,31 +304,36 @@ class SemanticMapper:
     def _splat(self, points: np.ndarray, labels: np.ndarray, x: float, y: float) -> tuple[np.ndarray, np.ndarray]:
         """Mark the points' cells; returns the flat indices of the cells that got an obstacle point and
         of those that got a floor point."""
-        cfg, size = self.cfg, self.cfg.map_cells
-        half = size // 2
-        cols = np.floor(points[:, 0] / cfg.resolution_m).astype(np.int64) + half
-        rows = np.floor(points[:, 1] / cfg.resolution_m).astype(np.int64) + half
-        z = points[:, 2]
-        keep = (rows >= 0) & (rows < size) & (cols >= 0) & (cols < size) & (z >= cfg.floor_min_height_m)
-        flat = rows[keep] * size + cols[keep]
-        z, labels = z[keep], labels[keep]
-        near = np.hypot(points[keep, 0] - x, points[keep, 1] - y) <= cfg.look_distance_m
-
-        below_top = z <= self.obstacle_max_height_m
-        self._explored.reshape(-1)[flat[below_top]] = True
-        self._looked.reshape(-1)[flat[below_top & near]] = True
-        high = z >= cfg.obstacle_min_height_m
-        self._obstacle.reshape(-1)[flat[below_top & high]] = True
-
-        labelled = (labels > 0) & (z <= cfg.category_max_height_m)
-        if labelled.any():
-            cat_flat = (labels[labelled].astype(np.int64) - 1) * (size * size) + flat[labelled]
-            cells, hits = np.unique(cat_flat, return_counts=True)
-            counts = self._counts.reshape(-1)
-            total = np.minimum(counts[cells].astype(np.int64) + hits, cfg.category_point_threshold)
-            counts[cells] = total
-            self._categories.reshape(-1)[cells[total >= cfg.category_point_threshold]] = True
-        return flat[below_top & high], flat[~high]
+        cfg, f32 = self.cfg, np.float32
+        seen_obstacle = np.empty(len(points), np.int64)
+        seen_floor = np.empty(len(points), np.int64)
+        n_obstacle, n_floor = _splat_points(
+            np.ascontiguousarray(points, dtype=np.float32),
+            np.ascontiguousarray(labels, dtype=np.int32),
+            f32(x),
+            f32(y),
+            f32(cfg.resolution_m),
+            cfg.map_cells,
+            np.array(
+                [
+                    cfg.floor_min_height_m,
+                    self.obstacle_max_height_m,
+                    cfg.obstacle_min_height_m,
+                    cfg.category_max_height_m,
+                    cfg.look_distance_m,
+                ],
+                dtype=np.float32,
+            ),
+            cfg.category_point_threshold,
+            self._explored,
+            self._looked,
+            self._obstacle,
+            self._counts,
+            self._categories,
+            seen_obstacle,
+            seen_floor,
+        )
+        return seen_obstacle[:n_obstacle], seen_floor[:n_floor]
 
     def _carve(self, points: np.ndarray, x: float, y: float, heading: float) -> np.ndarray:
         """Mark explored along each viewing bearing up to the first obstacle point, or up to the
@@ -428,3 +434,55 @@ def _footprint_cells(cell: tuple[int, int], radius: int, size: int) -> tuple[np.
     rr, cc = dr - radius + cell[0], dc - radius + cell[1]
     inside = (rr >= 0) & (rr < size) & (cc >= 0) & (cc < size)
     return rr[inside], cc[inside]
+
+
+@nb.njit(cache=True)
+def _splat_points(
+    points,
+    labels,
+    x,
+    y,
+    res,
+    size,
+    heights,
+    threshold,
+    explored,
+    looked,
+    obstacle,
+    counts,
+    categories,
+    seen_obstacle,
+    seen_floor,
+):
+    """``SemanticMapper._splat`` in one compiled pass, every comparison in the points' float32;
+    ``heights``: floor minimum, obstacle maximum, obstacle minimum, category maximum, look distance.
+    Fills ``seen_obstacle`` and ``seen_floor`` with flat cell indices; returns how many of each."""
+    floor_min, top, obstacle_min, category_max, look = heights[0], heights[1], heights[2], heights[3], heights[4]
+    half = size // 2
+    n_obstacle, n_floor = 0, 0
+    for i in range(points.shape[0]):
+        px, py, z = points[i, 0], points[i, 1], points[i, 2]
+        col = math.floor(px / res) + half
+        row = math.floor(py / res) + half
+        if not (0 <= row < size and 0 <= col < size and z >= floor_min):
+            continue
+        high = z >= obstacle_min
+        if not high:
+            seen_floor[n_floor] = row * size + col
+            n_floor += 1
+        if z <= top:
+            explored[row, col] = True
+            dx, dy = px - x, py - y
+            if np.float32(math.sqrt(np.float64(dx) * np.float64(dx) + np.float64(dy) * np.float64(dy))) <= look:
+                looked[row, col] = True
+            if high:
+                obstacle[row, col] = True
+                seen_obstacle[n_obstacle] = row * size + col
+                n_obstacle += 1
+        if labels[i] > 0 and z <= category_max:
+            k = labels[i] - 1
+            if counts[k, row, col] < threshold:
+                counts[k, row, col] += 1
+            if counts[k, row, col] >= threshold:
+                categories[k, row, col] = True
+    return n_obstacle, n_floor
