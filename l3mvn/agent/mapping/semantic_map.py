@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from l3mvn.core.camera import CameraIntrinsics, depth_to_points, too_near_points
+from l3mvn.core.compiled import hypot32
 from l3mvn.core.config import MapConfig, SimConfig
 from l3mvn.core.errors import L3MVNError
 from l3mvn.core.grid import disk
@@ -438,22 +439,22 @@ def _footprint_cells(cell: tuple[int, int], radius: int, size: int) -> tuple[np.
 
 @nb.njit(cache=True)
 def _splat_points(
-    points,
-    labels,
-    x,
-    y,
-    res,
-    size,
-    heights,
-    threshold,
-    explored,
-    looked,
-    obstacle,
-    counts,
-    categories,
-    seen_obstacle,
-    seen_floor,
-):
+    points: np.ndarray,
+    labels: np.ndarray,
+    x: float,
+    y: float,
+    res: float,
+    size: int,
+    heights: np.ndarray,
+    threshold: int,
+    explored: np.ndarray,
+    looked: np.ndarray,
+    obstacle: np.ndarray,
+    counts: np.ndarray,
+    categories: np.ndarray,
+    seen_obstacle: np.ndarray,
+    seen_floor: np.ndarray,
+) -> tuple[int, int]:
     """``SemanticMapper._splat`` in one compiled pass, every comparison in the points' float32;
     ``heights``: floor minimum, obstacle maximum, obstacle minimum, category maximum, look distance.
     Fills ``seen_obstacle`` and ``seen_floor`` with flat cell indices; returns how many of each."""
@@ -473,7 +474,7 @@ def _splat_points(
         if z <= top:
             explored[row, col] = True
             dx, dy = px - x, py - y
-            if np.float32(math.sqrt(np.float64(dx) * np.float64(dx) + np.float64(dy) * np.float64(dy))) <= look:
+            if hypot32(dx, dy) <= look:
                 looked[row, col] = True
             if high:
                 obstacle[row, col] = True

@@ -29,6 +29,7 @@ import numpy as np
 from scipy import ndimage as ndi
 
 from l3mvn.core.camera import CameraIntrinsics, ray_factors
+from l3mvn.core.compiled import hypot32
 from l3mvn.core.config import Config
 from l3mvn.core.grid import disk
 from l3mvn.core.types import Observation, Pose
@@ -145,7 +146,7 @@ def _record_frame(
         for r in range(h):
             if not valid[r, c]:
                 continue
-            reach = _length(px[r, c] - x0, py[r, c] - y0)
+            reach = hypot32(px[r, c] - x0, py[r, c] - y0)
             if not floor[r, c]:
                 if not is_wall or reach < end_reach:
                     end, end_reach, is_wall = r, reach, True
@@ -162,12 +163,6 @@ def _record_frame(
 
 
 @nb.njit(cache=True)
-def _length(dx, dy):
-    """float32 hypot as libm's hypotf rounds it: the exact length in double precision, rounded once."""
-    return np.float32(math.sqrt(np.float64(dx) * np.float64(dx) + np.float64(dy) * np.float64(dy)))
-
-
-@nb.njit(cache=True)
 def _mark(grid, x, y, res):
     row, col = math.floor(y / res), math.floor(x / res)
     if 0 <= row < grid.shape[0] and 0 <= col < grid.shape[1]:
@@ -178,7 +173,7 @@ def _mark(grid, x, y, res):
 def _mark_between(grid, ax, ay, bx, by, res, spacing):
     """Mark the points every ``spacing`` along a -> b, endpoints excluded (none when shorter)."""
     dx, dy = bx - ax, by - ay
-    length = _length(dx, dy)
+    length = hypot32(dx, dy)
     if not length > spacing:
         return
     count = math.ceil(length / spacing)
