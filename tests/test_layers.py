@@ -29,7 +29,7 @@ LAYERS: dict[str, list[set[str]]] = {
     "core": [
         {"errors"},
         {"frames"},
-        {"types", "config", "grid", "paths", "writing", "categories", "json_values", "plugins"},
+        {"types", "config", "grid", "paths", "writing", "categories", "json_values", "plugins", "compiled"},
         {"camera"},
     ],
     "world": [{"episode", "scenes"}, {"sim"}, {"task"}, {"episodes"}, {"datasets"}, {"baselines"}],
