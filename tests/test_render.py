@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import numba as nb
 import numpy as np
 import pytest
 from test_world import two_rooms
@@ -14,6 +15,8 @@ from l3mvn.core.errors import L3MVNError
 from l3mvn.core.frames import centre_pixels
 from l3mvn.core.types import Pose
 from l3mvn.run.viz import category_palette, colorize_depth, colorize_semantic, legend, side_by_side
+from l3mvn.world.scenes.procedural import generate_house
+from l3mvn.world.sim import render
 from l3mvn.world.sim.render import Renderer
 from l3mvn.world.sim.world import build_world
 
@@ -186,3 +189,135 @@ def test_colorized_images_mark_invalid_depth_black_and_keep_the_input_size():
     assert both.shape[0] == 2 and both.dtype == np.uint8
     with pytest.raises(L3MVNError, match="one height"):
         side_by_side(img, np.zeros((3, 3, 3), np.uint8))
+
+
+# -- the rasteriser's skipping of hidden triangles, against drawing them all ----------------------
+
+
+@nb.njit
+def _rasterise_in_index_order(vertices, triangles, origin, basis, focal, near, h, w, row0, col0, step, ids, depth):
+    """The renderer's rasteriser as it was before hidden triangles were skipped: every triangle on
+    screen drawn in index order, the first of equal depths kept."""
+    out_h, out_w = ids.shape
+    m = triangles.shape[0]
+    cam = render._to_camera(vertices, origin, basis)
+    cx, cy = w / 2.0, h / 2.0
+    # Per triangle: clipped, projected polygon (<= 4 vertices) and its inverse-depth plane.
+    poly = np.empty((m, 4, 2))
+    count = np.zeros(m, np.int32)
+    plane = np.empty((m, 3))
+    rows = np.empty((m, 2), np.int32)
+    for t in range(m):
+        n, xmin, xmax, ymin, ymax, _ = render._project(cam, triangles, t, near, focal, cx, cy, poly[t])
+        if n < 3 or xmax < 0.5 or xmin > w - 0.5 or ymax < 0.5 or ymin > h - 0.5:
+            continue  # behind the camera or off screen
+        i0, i1, i2 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        e1f, e1r, e1u = cam[i1, 0] - cam[i0, 0], cam[i1, 1] - cam[i0, 1], cam[i1, 2] - cam[i0, 2]
+        e2f, e2r, e2u = cam[i2, 0] - cam[i0, 0], cam[i2, 1] - cam[i0, 1], cam[i2, 2] - cam[i0, 2]
+        nf = e1r * e2u - e1u * e2r
+        nr = e1u * e2f - e1f * e2u
+        nu = e1f * e2r - e1r * e2f
+        c = nf * cam[i0, 0] + nr * cam[i0, 1] + nu * cam[i0, 2]
+        if abs(c) < 1e-12 * (abs(nf) + abs(nr) + abs(nu)):
+            continue  # the plane passes through the camera: seen edge-on
+        r0 = max(0, int(math.ceil(ymin - 0.5)))
+        r1 = min(h - 1, int(math.floor(ymax - 0.5)))
+        # ... as sampled rows: row0 + k * step for k in [r0, r1]
+        r0 = max(0, -((row0 - r0) // step))
+        r1 = min(out_h - 1, (r1 - row0) // step)
+        if r0 > r1:
+            continue
+        # 1/z = (nf + nr * u + nu * v) / c with u = (sx - cx) / f, v = (cy - sy) / f.
+        plane[t, 0] = (nf - nr * cx / focal + nu * cy / focal) / c
+        plane[t, 1] = nr / (focal * c)
+        plane[t, 2] = -nu / (focal * c)
+        rows[t, 0] = r0
+        rows[t, 1] = r1
+        count[t] = n
+    # Sampled columns from a column span [j0, j1]: first_col[j0] .. last_col[j1].
+    first_col = np.empty(w, np.int64)
+    last_col = np.empty(w, np.int64)
+    for j in range(w):
+        first_col[j] = max(0, -((col0 - j) // step))
+        last_col[j] = min(out_w - 1, (j - col0) // step)
+    invz = np.zeros(ids.shape)
+    ids[:, :] = m
+    for t in range(m):
+        n = count[t]
+        if n == 0:
+            continue
+        for row in range(rows[t, 0], rows[t, 1] + 1):
+            yc = row0 + row * step + 0.5
+            xl, xr = 1e30, -1e30
+            for k in range(n):
+                ax, ay = poly[t, k, 0], poly[t, k, 1]
+                bx, by = poly[t, (k + 1) % n, 0], poly[t, (k + 1) % n, 1]
+                if (ay - yc) * (by - yc) <= 0.0 and ay != by:
+                    x = ax + (yc - ay) * (bx - ax) / (by - ay)
+                    xl = min(xl, x)
+                    xr = max(xr, x)
+            j0 = max(0, int(math.ceil(xl - 0.5 - 1e-7)))
+            j1 = min(w - 1, int(math.floor(xr - 0.5 + 1e-7)))
+            base = plane[t, 0] + plane[t, 2] * yc
+            slope = plane[t, 1]
+            if j0 > j1:
+                continue
+            c0 = first_col[j0]
+            x = col0 + c0 * step + 0.5  # the pixel centre, exact in floating point
+            for col in range(c0, last_col[j1] + 1):
+                iz = base + slope * x
+                x += step
+                if iz > invz[row, col]:
+                    invz[row, col] = iz
+                    ids[row, col] = t
+    for i in range(ids.shape[0]):
+        for j in range(ids.shape[1]):
+            iz = invz[i, j]
+            depth[i, j] = 1.0 / iz if iz > 0.0 else np.inf
+
+
+def test_skipping_hidden_triangles_changes_no_pixel_of_any_frame():
+    """Triangles are drawn nearest first and skipped when hidden; the result must be exactly that of
+    drawing every triangle in index order (same triangle ids, same depths), level, tilted, whole and
+    strided, in a furnished house where most walls hide behind others."""
+    cfg = SimConfig()
+    house = generate_house(3)
+    world = build_world(house, cfg)
+    r = Renderer(world, cfg)
+    rng = np.random.default_rng(0)
+    cells = np.argwhere(house.navigable)
+    skipped = 0
+    for k in range(24):
+        row, col = cells[rng.integers(len(cells))]
+        x, y = house.cell_center(int(row), int(col))
+        pose, tilt = Pose(x, y, float(rng.uniform(-math.pi, math.pi))), math.radians([0.0, -30.0, 30.0, -12.5][k % 4])
+        for shape, corner, step, size in (((480, 640), (2, 2), 4, (120, 160)), ((121, 161), (0, 0), 1, (121, 161))):
+            origin, basis, focal = r._camera(pose, tilt, shape[1])
+            args = (r._vertices, r._triangles, origin, basis, focal, render._NEAR_M, *shape, *corner, step)
+            ids, depth = np.empty(size, np.int32), np.empty(size, np.float32)
+            expected_ids, expected_depth = np.empty(size, np.int32), np.empty(size, np.float32)
+            render._rasterise(*args, ids, depth)
+            _rasterise_in_index_order(*args, expected_ids, expected_depth)
+            assert np.array_equal(ids, expected_ids)
+            assert np.array_equal(depth, expected_depth)
+            skipped += len(np.setdiff1d(np.arange(world.num_triangles), ids))
+    assert skipped > 0
+
+
+def test_equal_depths_keep_the_lower_triangle_index_whichever_is_drawn_first():
+    """Two floor triangles on one plane, the later one nearer (so drawn first): where both cover a
+    pixel their depths are equal to the bit, and the earlier triangle must keep it, as drawing in
+    index order would. Edges along the axes make every plane coefficient exact."""
+    vertices = np.array(
+        [[1.0, 2.0, 0.0], [5.0, 2.0, 0.0], [1.0, -2.0, 0.0], [0.5, 1.0, 0.0], [2.5, 1.0, 0.0], [0.5, -1.0, 0.0]]
+    )
+    triangles = np.array([[0, 1, 2], [3, 4, 5]], np.int32)
+    camera = (np.array([-2.0, 0.0, 0.88]), render.camera_basis(0.0, 0.0), 40.0, 0.01)
+    args = (vertices, triangles, *camera, 60, 80, 0, 0, 1)
+    ids, depth = np.empty((60, 80), np.int32), np.empty((60, 80), np.float32)
+    expected_ids, expected_depth = np.empty((60, 80), np.int32), np.empty((60, 80), np.float32)
+    render._rasterise(*args, ids, depth)
+    _rasterise_in_index_order(*args, expected_ids, expected_depth)
+    assert (ids == 0).sum() > 0 and (ids == 1).sum() > 0  # both show where the other does not
+    assert np.array_equal(ids, expected_ids)
+    assert np.array_equal(depth, expected_depth)

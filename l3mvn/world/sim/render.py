@@ -10,6 +10,10 @@ shares the two cores, and numba's thread pool degrades badly when they are overs
 Shading is one fused pass: a precomputed shaded colour per triangle, a floor checker from the hit
 point, mild distance fog.
 
+Most of a house's walls hide behind nearer ones; the rasteriser draws triangles nearest first and
+skips those that small tiles of pixels already show to be behind (see ``_rasterise``), keeping the
+result of drawing all of them in order bit for bit.
+
 A frame is made as far as it is read (``l3mvn.core.frames``): the pixels an agent maps (the centre
 of every k x k block) are rasterised alone, with the very arithmetic of the whole frame (pixel
 centres, spans, the depth plane), so they hold the same values as the whole frame's; the whole
@@ -40,6 +44,7 @@ _FOG_RANGE_M = 12.0
 _TILE_M = 0.5  # floor checker: a metric cue for how far the floor runs
 _TILE_DARK = 0.86
 _NEAR_M = 0.01
+_TILE_PX = 8  # side of the pixel tiles whose nearest surfaces let hidden triangles be skipped
 
 
 class Renderer:
@@ -219,23 +224,61 @@ def _to_camera(vertices, origin, basis):
 
 
 @nb.njit(cache=True)
+def _outcodes(cam, near, focal, cx, cy, w, h):
+    """Per vertex: bit 1 behind the near plane; in front of it, bits 2-16 for beyond the left,
+    right, top and bottom pixel centres, in ``_project``'s own arithmetic. A triangle whose three
+    vertices share a bit is one ``_project`` would find off screen, so it is skipped unprojected."""
+    codes = np.zeros(cam.shape[0], np.int32)
+    for i in range(cam.shape[0]):
+        pf = cam[i, 0]
+        if not pf >= near:
+            codes[i] = 1
+            continue
+        sx = cx + focal * cam[i, 1] / pf
+        sy = cy - focal * cam[i, 2] / pf
+        horizontal = (2 if sx < 0.5 else 0) | (4 if sx > w - 0.5 else 0)
+        codes[i] = horizontal | (8 if sy < 0.5 else 0) | (16 if sy > h - 0.5 else 0)
+    return codes
+
+
+@nb.njit(cache=True)
 def _rasterise(vertices, triangles, origin, basis, focal, near, h, w, row0, col0, step, ids, depth):
     """Fill ``ids`` (triangle index, or len(triangles) for none) and ``depth`` (z, inf for none) at
-    the pixels (row0 + i * step, col0 + j * step) of an h x w frame."""
+    the pixels (row0 + i * step, col0 + j * step) of an h x w frame.
+
+    Each pixel keeps the largest inverse depth of the triangles covering it, the lowest index among
+    equals: a rule that does not depend on the order triangles are drawn in. So they are drawn
+    nearest first, and a triangle is skipped when every tile of pixels its box touches already
+    holds nearer surfaces than any it could show there (a bound on its plane over the box, with
+    room for rounding), which is what most walls behind walls are."""
     out_h, out_w = ids.shape
     m = triangles.shape[0]
     cam = _to_camera(vertices, origin, basis)
     cx, cy = w / 2.0, h / 2.0
-    # Per triangle: clipped, projected polygon (<= 4 vertices) and its inverse-depth plane.
+    # Sampled columns from a column span [j0, j1]: first_col[j0] .. last_col[j1].
+    first_col = np.empty(w, np.int64)
+    last_col = np.empty(w, np.int64)
+    for j in range(w):
+        first_col[j] = max(0, -((col0 - j) // step))
+        last_col[j] = min(out_w - 1, (j - col0) // step)
+    # Per triangle on screen: clipped, projected polygon (<= 4 vertices), its inverse-depth plane,
+    # its box of sampled pixels and a bound on the inverse depth it computes inside that box.
     poly = np.empty((m, 4, 2))
     count = np.zeros(m, np.int32)
     plane = np.empty((m, 3))
-    rows = np.empty((m, 2), np.int32)
+    box = np.empty((m, 4), np.int64)
+    codes = _outcodes(cam, near, focal, cx, cy, w, h)
+    reach = np.empty(m)
+    nearest = np.empty(m)
+    shown = np.empty(m, np.int64)
+    n_shown = 0
     for t in range(m):
-        n, xmin, xmax, ymin, ymax, _ = _project(cam, triangles, t, near, focal, cx, cy, poly[t])
+        i0, i1, i2 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        if codes[i0] & codes[i1] & codes[i2]:
+            continue  # wholly behind the camera or beyond one side of the screen
+        n, xmin, xmax, ymin, ymax, fmin = _project(cam, triangles, t, near, focal, cx, cy, poly[t])
         if n < 3 or xmax < 0.5 or xmin > w - 0.5 or ymax < 0.5 or ymin > h - 0.5:
             continue  # behind the camera or off screen
-        i0, i1, i2 = triangles[t, 0], triangles[t, 1], triangles[t, 2]
         e1f, e1r, e1u = cam[i1, 0] - cam[i0, 0], cam[i1, 1] - cam[i0, 1], cam[i1, 2] - cam[i0, 2]
         e2f, e2r, e2u = cam[i2, 0] - cam[i0, 0], cam[i2, 1] - cam[i0, 1], cam[i2, 2] - cam[i0, 2]
         nf = e1r * e2u - e1u * e2r
@@ -249,28 +292,58 @@ def _rasterise(vertices, triangles, origin, basis, focal, near, h, w, row0, col0
         # ... as sampled rows: row0 + k * step for k in [r0, r1]
         r0 = max(0, -((row0 - r0) // step))
         r1 = min(out_h - 1, (r1 - row0) // step)
-        if r0 > r1:
+        # Every pixel a row's span covers lies within the polygon's columns (the same tolerance).
+        j0 = max(0, int(math.ceil(xmin - 0.5 - 1e-7)))
+        j1 = min(w - 1, int(math.floor(xmax - 0.5 + 1e-7)))
+        if r0 > r1 or j0 > j1 or first_col[j0] > last_col[j1]:
             continue
         # 1/z = (nf + nr * u + nu * v) / c with u = (sx - cx) / f, v = (cy - sy) / f.
-        plane[t, 0] = (nf - nr * cx / focal + nu * cy / focal) / c
-        plane[t, 1] = nr / (focal * c)
-        plane[t, 2] = -nu / (focal * c)
-        rows[t, 0] = r0
-        rows[t, 1] = r1
+        p0 = (nf - nr * cx / focal + nu * cy / focal) / c
+        p1 = nr / (focal * c)
+        p2 = -nu / (focal * c)
+        plane[t, 0], plane[t, 1], plane[t, 2] = p0, p1, p2
+        box[t, 0], box[t, 1], box[t, 2], box[t, 3] = r0, r1, first_col[j0], last_col[j1]
+        xa, xb = col0 + box[t, 2] * step + 0.5, col0 + box[t, 3] * step + 0.5
+        ya, yb = row0 + r0 * step + 0.5, row0 + r1 * step + 0.5
+        # The plane is linear: its largest value over the box is at a corner. Each pixel's value is
+        # three rounded operations from the exact one; the allowance is thousands of times that.
+        top = p0 + max(p1 * xa, p1 * xb) + max(p2 * ya, p2 * yb)
+        reach[t] = top + 1e-12 * (abs(p0) + abs(p1) * max(abs(xa), abs(xb)) + abs(p2) * max(abs(ya), abs(yb)))
+        nearest[t] = fmin
         count[t] = n
-    # Sampled columns from a column span [j0, j1]: first_col[j0] .. last_col[j1].
-    first_col = np.empty(w, np.int64)
-    last_col = np.empty(w, np.int64)
-    for j in range(w):
-        first_col[j] = max(0, -((col0 - j) // step))
-        last_col[j] = min(out_w - 1, (j - col0) // step)
+        shown[n_shown] = t
+        n_shown += 1
+    shown = shown[:n_shown]
+    shown = shown[np.argsort(nearest[shown], kind="mergesort")]
     invz = np.zeros(ids.shape)
     ids[:, :] = m
-    for t in range(m):
-        n = count[t]
-        if n == 0:
+    tiles_h = (out_h + _TILE_PX - 1) // _TILE_PX
+    tiles_w = (out_w + _TILE_PX - 1) // _TILE_PX
+    tile_floor = np.zeros((tiles_h, tiles_w))  # least inverse depth in the tile, where not stale
+    stale = np.zeros((tiles_h, tiles_w), np.bool_)
+    for t in shown:
+        tr0, tr1 = box[t, 0] // _TILE_PX, box[t, 1] // _TILE_PX
+        tc0, tc1 = box[t, 2] // _TILE_PX, box[t, 3] // _TILE_PX
+        hidden = True
+        for tr in range(tr0, tr1 + 1):
+            for tc in range(tc0, tc1 + 1):
+                if stale[tr, tc]:
+                    least = np.inf
+                    for row in range(tr * _TILE_PX, min((tr + 1) * _TILE_PX, out_h)):
+                        for col in range(tc * _TILE_PX, min((tc + 1) * _TILE_PX, out_w)):
+                            least = min(least, invz[row, col])
+                    tile_floor[tr, tc] = least
+                    stale[tr, tc] = False
+                if not reach[t] < tile_floor[tr, tc]:
+                    hidden = False
+                    break
+            if not hidden:
+                break
+        if hidden:
             continue
-        for row in range(rows[t, 0], rows[t, 1] + 1):
+        stale[tr0 : tr1 + 1, tc0 : tc1 + 1] = True
+        n = count[t]
+        for row in range(box[t, 0], box[t, 1] + 1):
             yc = row0 + row * step + 0.5
             xl, xr = 1e30, -1e30
             for k in range(n):
@@ -291,7 +364,8 @@ def _rasterise(vertices, triangles, origin, basis, focal, near, h, w, row0, col0
             for col in range(c0, last_col[j1] + 1):
                 iz = base + slope * x
                 x += step
-                if iz > invz[row, col]:
+                held = invz[row, col]
+                if iz > held or (iz == held and iz > 0.0 and t < ids[row, col]):
                     invz[row, col] = iz
                     ids[row, col] = t
     for i in range(ids.shape[0]):
@@ -347,9 +421,12 @@ def _screen_box(vertices, triangles, origin, basis, focal, near, h, w, dmax, box
     clipped polygon); False when none is on screen."""
     cam = _to_camera(vertices, origin, basis)
     cx, cy = w / 2.0, h / 2.0
+    codes = _outcodes(cam, near, focal, cx, cy, w, h)
     poly = np.empty((4, 2))
     found = False
     for t in range(triangles.shape[0]):
+        if codes[triangles[t, 0]] & codes[triangles[t, 1]] & codes[triangles[t, 2]]:
+            continue
         n, xmin, xmax, ymin, ymax, fmin = _project(cam, triangles, t, near, focal, cx, cy, poly)
         if n < 3 or xmax < 0.5 or xmin > w - 0.5 or ymax < 0.5 or ymin > h - 0.5:
             continue
