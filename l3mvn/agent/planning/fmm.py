@@ -1,11 +1,11 @@
 """Geodesic distance fields by Fast Marching (scikit-fmm's values, compiled: ``marcher``), computed on
 a window of the map.
 
-FMM costs about 0.2 us per marched cell on one core, so a whole 720x720 map (~100 ms) is far over
-the planner's few-millisecond budget. Two ways to march less, both exact where they claim a value:
-a ``Window`` (only a rectangle of the map is marched) and ``limit_m`` (marching stops at that
-distance, a narrow band). ``GeodesicField`` keeps the values together with the window they
-belong to, so callers index it in map cells and never juggle offsets.
+FMM costs about 0.1-0.2 us per marched cell on one core (more as the front grows), so a whole
+720x720 map (~90 ms) is far over the planner's few-millisecond budget. Two ways to march less,
+both exact where they claim a value: a ``Window`` (only a rectangle of the map is marched) and
+``limit_m`` (marching stops at that distance, a narrow band). ``GeodesicField`` keeps the values
+together with the window they belong to, so callers index it in map cells and never juggle offsets.
 """
 
 from __future__ import annotations
