@@ -62,6 +62,19 @@ def test_open_floors_with_many_equal_values_and_rooms_behind_walls():
             assert np.array_equal(march(traversible, sources, dx, narrow), expected)
 
 
+def test_house_sized_grids_whose_fronts_fill_a_deep_heap():
+    """Fronts of thousands of cells move keys up and down many levels of the heap."""
+    rng = np.random.default_rng(7)
+    for density in (0.0, 0.1, 0.3):
+        traversible = rng.random((240, 260)) >= density
+        sources = np.zeros_like(traversible)
+        sources[rng.integers(240, size=3), rng.integers(260, size=3)] = True
+        sources &= traversible
+        for narrow in (0.0, 4.0):
+            expected = skfmm_distances(traversible, sources, 0.05, narrow)
+            assert np.array_equal(march(traversible, sources, 0.05, narrow), expected), (density, narrow)
+
+
 def test_no_source_or_no_free_cell_reaches_nothing():
     free = np.ones((4, 5), bool)
     assert np.isinf(march(free, np.zeros_like(free), 0.05, 0.0)).all()
