@@ -14,9 +14,9 @@ value frozen before any neighbour is updated, and marching stopped at the first 
 narrow band. What does not: the order in which equal values leave the heap. An update reads only
 frozen cells, and a whole group of equal values is frozen before any of them updates a neighbour,
 so every update in a group sees the same frozen set and the group's order changes no value. That
-frees the heap (an indexed binary heap here, keys kept in heap order: about half the time of
-keys kept per cell) and the indexing (a two-cell masked border instead of bounds checks: skfmm
-treats cells off the grid as it treats masked ones).
+frees the heap (an indexed binary heap here, its keys kept in heap order) and the indexing (a
+two-cell masked border instead of bounds checks: skfmm treats cells off the grid as it treats
+masked ones).
 
 Left out, as the planner never asks them: distances from a zero contour between cells (all its
 sources are cells at distance zero), signed distances, periodic borders, other dimensions.
