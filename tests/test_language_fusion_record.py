@@ -9,6 +9,7 @@ from conftest import first_frontier_choice
 
 from l3mvn.agent.frontiers import Frontier, Fusion
 from l3mvn.agent.language import GOALS
+from l3mvn.agent.policies.global_policies import unit_scores
 from l3mvn.agent.policies.language_policy import LanguageFrontierPolicy
 
 RNG = np.random.default_rng(0)
@@ -66,7 +67,8 @@ def test_the_paper_rule_recomputed_from_its_record_gives_the_policys_choice_and_
     assert fusion.explore == s_cu and fusion.ids == tuple(range(len(frontiers)))
     again, choice, fused = _paper_from_record(fusion)
     assert (again, choice) == (fusion.branch, fusion.choice) == (branch, sel.frontier)
-    assert np.array_equal(fused, fusion.compared) and np.array_equal(fused, sel.scores)
+    assert np.array_equal(fused, fusion.compared)
+    assert np.array_equal(sel.scores, unit_scores(fused))  # what the agent's commitment reads: [0, 1]
     assert [ls.fused for ls in sel.language] == list(fusion.compared)
     assert all(ls.expected_m == {} for ls in sel.language)  # the room head predicts no distances
 

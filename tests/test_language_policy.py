@@ -56,6 +56,24 @@ def test_in_between_fuses_with_cost_utility_rescaled_into_the_bound(policy):
     assert sel.language[0].fused == pytest.approx(1 / 6, abs=1e-6)
 
 
+def test_commitment_reads_the_paper_rules_scores_on_the_scale_of_every_other_policy(policy):
+    """The paper rule ranks by fused scores inside the bound B (0.15-0.30 below sup B): the agent's
+    commitment margin (0.15) must read them scaled into [0, 1] over the list, as it reads S_CU, or it
+    keeps the frontier pursued so far against any other that exploration alone prefers."""
+    from l3mvn.agent.modular.exploration import ExplorationGoals
+    from l3mvn.agent.planning import LocalPlanner
+    from l3mvn.core.config import Config
+
+    frontiers = [_frontier(0, ("sink", "bathtub", "shower"), 0.2), _frontier(1, ("toilet", "sink"), 0.9)]
+    sel = policy.select(frontiers, None, "tv", np.random.default_rng(0))
+    assert "exploration" in sel.reason and sel.language[0].fused == pytest.approx(0.15 + 0.2 * 0.15)
+    assert sel.scores == pytest.approx([0.0, 1.0])
+    config = Config()
+    goals = ExplorationGoals(policy, config, LocalPlanner.for_sim(config.planner, config.map.resolution_m, config.sim))
+    goals.frontiers, goals.cell, goals.frontier = frontiers, frontiers[0].center, 0
+    assert goals.commit(sel) is sel  # S_CU 0.9 against 0.2: cost-utility would leave frontier 0 too
+
+
 def test_official_code_feedforward_falls_back_to_best_utility_below_0_2():
     policy = LanguageFrontierPolicy("l3mvn-ff", "feedforward", selection="official_code", head="rooms")
     frontiers = [_frontier(0, (), 0.3, utility=5.0), _frontier(1, (), 0.9, utility=20.0)]

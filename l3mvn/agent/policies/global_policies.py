@@ -52,13 +52,18 @@ class GlobalPolicy(Protocol):
         """None when there is nothing to choose (no frontier)."""
 
 
+def unit_scores(scores: np.ndarray) -> np.ndarray:
+    """Scores (higher is better) min-max scaled into [0, 1] over the list: the scale the agent's
+    commitment margin reads, whatever a rule's own scale (a fixed margin on a narrow scale, such as
+    the paper rule's bound, would keep the current frontier against nearly any other)."""
+    span = float(scores.max() - scores.min())
+    return np.ones_like(scores) if span <= 0 else 1.0 - (scores.max() - scores) / span
+
+
 def least_total(total: np.ndarray) -> tuple[int, np.ndarray]:
     """The frontier with the least total metres, and the totals flipped into [0, 1] scores (1 = least,
     0 = most): the scale the agent's commitment margin reads."""
-    i = int(np.argmin(total))
-    span = float(total.max() - total.min())
-    scores = np.ones_like(total) if span <= 0 else 1.0 - (total - total.min()) / span
-    return i, scores
+    return int(np.argmin(total)), unit_scores(-total)
 
 
 def size_bonus_m(frontiers: list[Frontier], cu_lambda: float) -> np.ndarray:

@@ -33,7 +33,7 @@ import numpy as np
 
 from l3mvn.agent.frontiers import Frontier, Fusion
 from l3mvn.agent.mapping import SemanticMap
-from l3mvn.agent.policies.global_policies import LanguageScore, Selection, least_total, size_bonus_m
+from l3mvn.agent.policies.global_policies import LanguageScore, Selection, least_total, size_bonus_m, unit_scores
 from l3mvn.core.config import SELECTIONS, FrontierConfig, PolicyConfig
 from l3mvn.core.config.policy import HEAD_SCORER, LLM_SCORER
 from l3mvn.core.errors import L3MVNError
@@ -152,6 +152,8 @@ class LanguageFrontierPolicy:
             fused = s_llm
         else:
             i, reason, fused, fusion = self._paper(frontiers, s_llm, explore)
+        # The paper rule's fused scores live on the bound's narrow scale: commitment reads them in [0, 1].
+        keep = unit_scores(np.asarray(fused, dtype=np.float64)) if self.selection == "paper" else fused
         expected = (
             [{} for _ in frontiers]
             if all_metres is None
@@ -167,7 +169,7 @@ class LanguageFrontierPolicy:
             )
             for objs, d, p, v, e in zip(objects, dists, s_llm, fused, expected)
         )
-        return Selection(i, frontiers[i].center, np.asarray(fused, dtype=np.float64), reason, language, fusion)
+        return Selection(i, frontiers[i].center, np.asarray(keep, dtype=np.float64), reason, language, fusion)
 
     def _fusion(
         self,
