@@ -3,10 +3,12 @@
     python bench/rule_ablation.py --dataset DEV --split train --policy cost-utility --out runs/rules
     python bench/rule_ablation.py ... --rules keep_heading,clearance   # a subset
     python bench/rule_ablation.py ... --table-only                     # the table from the files there
+    python bench/rule_ablation.py ... --policy l3mvn-ff --set policy.head=map --out runs/rules-map
 
 Runs ``l3mvn eval --resume`` once with the default config (``base``) and once per rule with that rule's
 ``--set`` values, each into ``OUT/<policy>_<rule>.jsonl`` (rerunning resumes a cut-off run and skips a
-finished one), then prints one markdown row per rule: what the rule gains (default minus rule off,
+finished one; ``--set`` settings apply to every configuration, before the rule's own, so give each
+``--set`` its own ``--out``), then prints one markdown row per rule: what the rule gains (default minus rule off,
 paired per episode, with a 95% bootstrap interval) in SR and SPL on the houses changes are decided on
 and on the held-out houses, the episodes walked differently, and the mean steps with the rule off.
 A positive gain is what the rule is worth; an interval across zero says the episodes cannot tell.
@@ -27,6 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from l3mvn.agent.language.frontier_head import house_split  # noqa: E402
+from l3mvn.core.config import Config, override  # noqa: E402
 from l3mvn.core.errors import L3MVNError  # noqa: E402
 from l3mvn.run.eval.paired import pair_rows  # noqa: E402
 from l3mvn.run.eval.results import episode_lines  # noqa: E402
@@ -107,7 +110,7 @@ def run_eval(args: argparse.Namespace, rule: str, settings: tuple[str, ...], out
     cmd = [sys.executable, "-m", "l3mvn.run.cli", "eval", "--dataset", args.dataset, "--split", args.split]
     cmd += ["--policy", args.policy, "--frame", args.frame, "--workers", str(args.workers), "--seed", str(args.seed)]
     cmd += ["--out", str(out), "--resume"]
-    for s in settings:
+    for s in (*args.set, *settings):
         cmd += ["--set", s]
     print(f"{rule}: {' '.join(settings) or 'defaults'} -> {out}", file=sys.stderr, flush=True)
     done = subprocess.run(cmd, stdout=subprocess.DEVNULL, check=False)
@@ -194,7 +197,18 @@ def main() -> int:
     ap.add_argument("--rules", help=f"comma-separated subset of: {', '.join(r.name for r in RULES)}")
     ap.add_argument("--held-out", help="comma-separated houses (default: house_split's test side)")
     ap.add_argument("--table-only", action="store_true", help="print the table from the files in --out")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.FIELD=VALUE",
+        help="a setting for every configuration, the default's included (e.g. policy.head=map)",
+    )
     args = ap.parse_args()
+    try:
+        override(Config(), args.set)
+    except L3MVNError as exc:
+        raise SystemExit(f"error: {exc}") from None
 
     known = {r.name: r for r in RULES}
     chosen = list(RULES)

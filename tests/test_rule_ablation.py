@@ -111,3 +111,32 @@ def test_table_only_prints_a_row_per_rule(ablation, tmp_path):
     assert done.returncode == 0, done.stderr
     line = next(li for li in done.stdout.splitlines() if li.startswith("| keep_heading"))
     assert "+0.333" in line and "| 1 | 200 |" in line
+
+
+def test_set_reaches_every_configuration_before_the_rules_own(ablation, tmp_path, monkeypatch):
+    """``--set policy.head=map`` ablates the rules of l3mvn-ff's map head: the default and each rule-off
+    run carry it, and a rule's own setting comes after it (the later ``--set`` wins in ``l3mvn eval``)."""
+    import argparse
+
+    seen = []
+    monkeypatch.setattr(
+        ablation.subprocess, "run", lambda cmd, **kw: seen.append(cmd) or subprocess.CompletedProcess(cmd, 0)
+    )
+    args = argparse.Namespace(
+        dataset="x", split="train", policy="l3mvn-ff", frame="480x640", workers=2, seed=0, set=["policy.head=map"]
+    )
+    ablation.run_eval(args, "base", (), tmp_path / "a.jsonl")
+    ablation.run_eval(args, "commitment", ("agent.commitment_margin=0",), tmp_path / "b.jsonl")
+    sets = [[c[i + 1] for i, a in enumerate(c) if a == "--set"] for c in seen]
+    assert sets == [["policy.head=map"], ["policy.head=map", "agent.commitment_margin=0"]]
+
+
+def test_a_bad_set_is_refused_before_any_run(tmp_path):
+    done = subprocess.run(
+        [sys.executable, str(SCRIPT), "--dataset", "x", "--policy", "poni", "--out", str(tmp_path / "o")]
+        + ["--set", "agent.teleport=1"],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode != 0 and done.stderr.startswith("error:") and "teleport" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and not (tmp_path / "o").exists()

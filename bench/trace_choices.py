@@ -1,0 +1,107 @@
+"""One policy's frontier choices in given episodes, with the ground truth beside every frontier.
+
+    python bench/trace_choices.py --dataset DIR [--split train] --policy poni --episode Stockman/0/4
+        [--episode KEY ...] [--frame 480x640] [--set SECTION.FIELD=VALUE ...]
+
+Walks each episode as ``l3mvn eval`` does (same config, same seed) and prints every fresh choice
+among frontiers: the frontier the agent took, the rule's own pick where the agent's commitment kept
+another, and the frontier the oracle would take (least travel + true metres on to the goal). Per
+frontier: travel cost, size in cells, what the rule compared (a language policy's fused score, PONI's
+or the expected rule's total metres, else S_CU), the prior's expected metres on where it predicts
+them, and the true geodesic metres on from the frontier to the goal (``inf``: off the true floor).
+
+What the dashboard shows of one decision, for every decision of an episode, with what the agent cannot
+know: whether a lost episode is the prior's error (it expected the goal beyond the wrong frontier),
+the walk's (commitment kept a worse one), or a near tie.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+
+from l3mvn.agent.decision import Decision  # noqa: E402
+from l3mvn.agent.policies.oracle_frontier import frontier_goal_distances  # noqa: E402
+from l3mvn.core.config import Config, override  # noqa: E402
+from l3mvn.core.errors import L3MVNError  # noqa: E402
+from l3mvn.run.registry import check_policy  # noqa: E402
+from l3mvn.run.runner import Runner  # noqa: E402
+from l3mvn.world.baselines import ObjectDistances  # noqa: E402
+from l3mvn.world.datasets import load_episode_set  # noqa: E402
+
+
+def choice_lines(step: int, decision: Decision, truth: np.ndarray) -> list[str]:
+    """The lines of one choice: a header, then one row per frontier (``truth``: true metres on)."""
+    frontiers = decision.frontiers
+    fusion = frontiers[0].fusion
+    cost = np.array([f.cost for f in frontiers], dtype=np.float64)
+    compared = np.array(fusion.compared) if fusion is not None else np.array([f.s_cu for f in frontiers])
+    expected = fusion.expected_m if fusion is not None and fusion.expected_m else None
+    took, oracle = decision.chosen_frontier, int(np.argmin(cost + truth))
+    header = f"step {step}: took F{frontiers[took].id}" if took is not None else f"step {step}: took none"
+    if fusion is not None and took is not None and fusion.choice != took:
+        header += f" (kept by commitment; the rule picked F{frontiers[fusion.choice].id})"
+    header += f"; oracle F{frontiers[oracle].id}"
+    lines = [header]
+    for k, f in enumerate(frontiers):
+        mark = ("*" if k == took else " ") + ("o" if k == oracle else " ")
+        prior = f"  expected {expected[k]:5.1f} m" if expected is not None else ""
+        lines.append(
+            f"  {mark} F{f.id:<3d} cost {cost[k]:5.1f} m  size {f.size:4d}  compared {compared[k]:6.2f}{prior}"
+            f"  true on {truth[k]:5.1f} m"
+        )
+    return lines
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--dataset", required=True)
+    ap.add_argument("--split", default="train")
+    ap.add_argument("--policy", required=True)
+    ap.add_argument("--episode", action="append", required=True, metavar="KEY", help="e.g. Stockman/0/4")
+    ap.add_argument("--frame", default="480x640", metavar="HxW")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE")
+    args = ap.parse_args()
+    size = args.frame.lower().split("x")
+    if len(size) != 2 or not all(v.isdigit() and int(v) > 0 for v in size):
+        raise SystemExit(f"error: --frame must be HxW, e.g. 480x640, got {args.frame!r}")
+    try:
+        check_policy(args.policy)
+        cfg = override(Config().with_frame(int(size[0]), int(size[1])), args.set)
+        episodes = load_episode_set(args.dataset, args.split, seed=args.seed, cfg=cfg)
+    except L3MVNError as exc:
+        raise SystemExit(f"error: {exc}") from None
+    by_key = {ep.key: ep for ep in episodes.episodes}
+    missing = [k for k in args.episode if k not in by_key]
+    if missing:
+        example = next(iter(by_key), "none there")
+        raise SystemExit(f"error: no episode {', '.join(missing)} in {args.dataset} ({args.split}); e.g. {example}")
+    runner = Runner(cfg, seed=args.seed)
+    for key in args.episode:
+        ep = by_key[key]
+        scene = episodes.scene_of(ep)
+        distances = partial(ObjectDistances(runner.floor(scene).task), ep.goal)
+        session = runner.session(scene, args.policy)
+        session.start(ep)
+        print(f"# {key}: {ep.goal}, {args.policy}")
+        for step, decision in session.frontier_choices():
+            truth = frontier_goal_distances(decision.frontiers, decision.map, distances)
+            print("\n".join(choice_lines(step, decision, truth)))
+        result = session.result
+        outcome = "success" if result.success else result.failure
+        print(f"# {key}: {outcome} in {result.steps} steps, SPL {result.spl:.3f}")
+    runner.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

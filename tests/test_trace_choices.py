@@ -1,0 +1,73 @@
+"""bench/trace_choices.py: each choice names the frontier taken, the rule's pick where commitment kept
+another, and the oracle's, with every frontier's numbers and its true metres on."""
+
+import importlib.util
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from l3mvn.agent.decision import Decision
+from l3mvn.agent.frontiers import Frontier, Fusion
+from l3mvn.agent.frontiers.types import POTENTIALS_RULE
+from l3mvn.core.types import Action
+
+SCRIPT = Path(__file__).resolve().parents[1] / "bench" / "trace_choices.py"
+
+
+def _module():
+    spec = importlib.util.spec_from_file_location("trace_choices", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _frontiers(fusion=None):
+    cells = np.zeros((1, 2), np.int64)
+    out = [Frontier(10 + k, cells, (100, 100 + 20 * k), 5 + k, 1.0 + k, 1.0, 1.0 + k, 0.5 - 0.1 * k) for k in range(3)]
+    return [replace(f, fusion=fusion) for f in out]
+
+
+def test_a_choice_kept_by_commitment_names_the_rules_pick_and_the_oracles():
+    fusion = Fusion(
+        rule=POTENTIALS_RULE,
+        branch="least total",
+        choice=0,
+        ids=(10, 11, 12),
+        s_llm=(0.5, 0.4, 0.3),
+        explore=(0.1, 0.1, 0.1),
+        compared=(5.4, 6.3, 9.0),
+        expected_m=(4.6, 5.1, 7.0),
+    )
+    decision = Decision(action=Action.parse("move_forward"), frontiers=_frontiers(fusion), chosen_frontier=1)
+    lines = _module().choice_lines(46, decision, np.array([9.0, 0.7, np.inf]))
+    assert lines[0] == "step 46: took F11 (kept by commitment; the rule picked F10); oracle F11"
+    assert lines[2].startswith("  *o F11") and "compared   6.30" in lines[2] and "expected   5.1 m" in lines[2]
+    assert "true on   inf m" in lines[3] and len(lines) == 4
+
+
+def test_a_policy_without_a_fusion_record_shows_s_cu_and_no_expected_metres():
+    decision = Decision(action=Action.parse("move_forward"), frontiers=_frontiers(), chosen_frontier=0)
+    lines = _module().choice_lines(13, decision, np.array([3.0, 1.0, 2.0]))
+    assert lines[0] == "step 13: took F10; oracle F11"  # costs 1, 2, 3: totals 4, 3, 5
+    assert "compared   0.50" in lines[1] and "expected" not in "".join(lines)
+
+
+def test_bad_arguments_are_one_line_errors_before_any_walk(tmp_path):
+    def run(*extra):
+        return subprocess.run(
+            [sys.executable, str(SCRIPT), "--dataset", str(tmp_path), "--episode", "A/0/1", *extra],
+            capture_output=True,
+            text=True,
+        )
+
+    for extra, words in (
+        (("--policy", "poni", "--frame", "48"), "--frame must be HxW"),
+        (("--policy", "ponix"), "unknown policy 'ponix'"),
+        (("--policy", "poni", "--set", "agent.teleport=1"), "unknown setting 'teleport'"),
+    ):
+        done = run(*extra)
+        assert done.returncode != 0 and done.stderr.startswith("error:") and words in done.stderr, done.stderr
+        assert len(done.stderr.strip().splitlines()) == 1
