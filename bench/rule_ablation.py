@@ -8,10 +8,11 @@
 Runs ``l3mvn eval --resume`` once with the default config (``base``) and once per rule with that rule's
 ``--set`` values, each into ``OUT/<policy>_<rule>.jsonl`` (rerunning resumes a cut-off run and skips a
 finished one; ``--set`` settings apply to every configuration, before the rule's own, so give each
-``--set`` its own ``--out``), then prints one markdown row per rule: what the rule gains (default minus rule off,
-paired per episode, with a 95% bootstrap interval) in SR and SPL on the houses changes are decided on
-and on the held-out houses, the episodes walked differently, and the mean steps with the rule off.
-A positive gain is what the rule is worth; an interval across zero says the episodes cannot tell.
+``--set`` its own ``--out``), then prints one markdown row per rule: what the rule gains (default minus
+rule off, paired per episode, with a 95% bootstrap interval) in SR and SPL on the houses changes are
+decided on and on the held-out houses, the episodes walked differently, and the mean steps with the
+rule off. A positive gain is what the rule is worth; an interval across zero says the episodes cannot
+tell.
 
 Held-out houses: those ``house_split`` puts on its test side (docs/benchmarks.md, "Held-out houses"),
 or ``--held-out NAME,NAME``.
