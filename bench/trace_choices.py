@@ -1,6 +1,6 @@
 """One policy's frontier choices in given episodes, with the ground truth beside every frontier.
 
-    python bench/trace_choices.py --dataset DIR [--split train] --policy poni --episode Stockman/0/4
+    python bench/trace_choices.py --dataset DIR [--split train] --policy poni --episode HOUSE/FLOOR/ID
         [--episode KEY ...] [--frame 480x640] [--set SECTION.FIELD=VALUE ...]
 
 Walks each episode as ``l3mvn eval`` does (same config, same seed) and prints every fresh choice
@@ -66,7 +66,9 @@ def main() -> int:
     ap.add_argument("--dataset", required=True)
     ap.add_argument("--split", default="train")
     ap.add_argument("--policy", required=True)
-    ap.add_argument("--episode", action="append", required=True, metavar="KEY", help="e.g. Stockman/0/4")
+    ap.add_argument(
+        "--episode", action="append", required=True, metavar="HOUSE/FLOOR/ID", help="as in the result lines"
+    )
     ap.add_argument("--frame", default="480x640", metavar="HxW")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE")
