@@ -32,6 +32,7 @@ from l3mvn.agent.decision import Decision  # noqa: E402
 from l3mvn.agent.policies.oracle_frontier import frontier_goal_distances  # noqa: E402
 from l3mvn.core.config import Config, override  # noqa: E402
 from l3mvn.core.errors import L3MVNError  # noqa: E402
+from l3mvn.run.cli import frame_size  # noqa: E402
 from l3mvn.run.registry import check_policy  # noqa: E402
 from l3mvn.run.runner import Runner  # noqa: E402
 from l3mvn.world.baselines import ObjectDistances  # noqa: E402
@@ -73,12 +74,13 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE")
     args = ap.parse_args()
-    size = args.frame.lower().split("x")
-    if len(size) != 2 or not all(v.isdigit() and int(v) > 0 for v in size):
-        raise SystemExit(f"error: --frame must be HxW, e.g. 480x640, got {args.frame!r}")
+    try:
+        height, width = frame_size(args.frame)
+    except argparse.ArgumentTypeError as exc:
+        raise SystemExit(f"error: --frame: {exc}") from None
     try:
         check_policy(args.policy)
-        cfg = override(Config().with_frame(int(size[0]), int(size[1])), args.set)
+        cfg = override(Config().with_frame(height, width), args.set)
         episodes = load_episode_set(args.dataset, args.split, seed=args.seed, cfg=cfg)
     except L3MVNError as exc:
         raise SystemExit(f"error: {exc}") from None
@@ -88,20 +90,22 @@ def main() -> int:
         example = next(iter(by_key), "none there")
         raise SystemExit(f"error: no episode {', '.join(missing)} in {args.dataset} ({args.split}); e.g. {example}")
     runner = Runner(cfg, seed=args.seed)
-    for key in args.episode:
-        ep = by_key[key]
-        scene = episodes.scene_of(ep)
-        distances = partial(ObjectDistances(runner.floor(scene).task), ep.goal)
-        session = runner.session(scene, args.policy)
-        session.start(ep)
-        print(f"# {key}: {ep.goal}, {args.policy}")
-        for step, decision in session.frontier_choices():
-            truth = frontier_goal_distances(decision.frontiers, decision.map, distances)
-            print("\n".join(choice_lines(step, decision, truth)))
-        result = session.result
-        outcome = "success" if result.success else result.failure
-        print(f"# {key}: {outcome} in {result.steps} steps, SPL {result.spl:.3f}")
-    runner.close()
+    try:  # a habitat floor is a server process: closed however the walk ends
+        for key in args.episode:
+            ep = by_key[key]
+            scene = episodes.scene_of(ep)
+            distances = partial(ObjectDistances(runner.floor(scene).task), ep.goal)
+            session = runner.session(scene, args.policy)
+            session.start(ep)
+            print(f"# {key}: {ep.goal}, {args.policy}")
+            for step, decision in session.frontier_choices():
+                truth = frontier_goal_distances(decision.frontiers, decision.map, distances)
+                print("\n".join(choice_lines(step, decision, truth)))
+            result = session.result
+            outcome = "success" if result.success else result.failure
+            print(f"# {key}: {outcome} in {result.steps} steps, SPL {result.spl:.3f}")
+    finally:
+        runner.close()
     return 0
 
 

@@ -64,7 +64,8 @@ def test_bad_arguments_are_one_line_errors_before_any_walk(tmp_path):
         )
 
     for extra, words in (
-        (("--policy", "poni", "--frame", "48"), "--frame must be HxW"),
+        (("--policy", "poni", "--frame", "48"), "frame size must look like 120x160"),
+        (("--policy", "poni", "--frame", "0x5"), "frame size must be positive"),
         (("--policy", "ponix"), "unknown policy 'ponix'"),
         (("--policy", "poni", "--set", "agent.teleport=1"), "unknown setting 'teleport'"),
     ):

@@ -21,7 +21,8 @@ from l3mvn.core.config.task import VIEW_POINT_RULES
 from l3mvn.core.errors import L3MVNError, one_line
 
 
-def _frame(text: str) -> tuple[int, int]:
+def frame_size(text: str) -> tuple[int, int]:
+    """``HxW`` as (height, width): the one reading of a frame-size flag (the CLI and the benches)."""
     try:
         h, w = (int(v) for v in text.lower().split("x"))
     except ValueError:
@@ -51,7 +52,7 @@ def _add_sim_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--frame",
-        type=_frame,
+        type=frame_size,
         default=None,
         metavar="HxW",
         help="render size (default 480x640; 120x160 is what the mapper consumes)",
@@ -484,7 +485,7 @@ def _cmd_audit(args: argparse.Namespace) -> int:
 
     if args.frame is not None:
         try:
-            args.frame = _frame(args.frame)
+            args.frame = frame_size(args.frame)
         except argparse.ArgumentTypeError as exc:
             raise L3MVNError(f"--frame: {exc}") from None
     cfg = _config(args)
