@@ -9,6 +9,9 @@ another, and the frontier the oracle would take (least travel + true metres on t
 frontier: travel cost, size in cells, what the rule compared (a language policy's fused score, PONI's
 or the expected rule's total metres, else S_CU), the prior's expected metres on where it predicts
 them, and the true geodesic metres on from the frontier to the goal (``inf``: off the true floor).
+After each episode, one line on the goal's frontier (one within 1.5 m of the goal by the true floor):
+at how many choices it was listed and taken, its median rank by what the rule compared, and, for a
+prior that predicts metres, how much nearer the goal it expected it than the frontier taken.
 
 What the dashboard shows of one decision, for every decision of an episode, with what the agent cannot
 know: whether a lost episode is the prior's error (it expected the goal beyond the wrong frontier),
@@ -20,6 +23,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
@@ -62,6 +66,65 @@ def choice_lines(step: int, decision: Decision, truth: np.ndarray) -> list[str]:
     return lines
 
 
+# A frontier this near the goal by the true floor counts as the goal's: its door, or the room's open side.
+GOAL_FRONTIER_M = 1.5
+
+
+def goal_frontier(decision: Decision, truth: np.ndarray) -> tuple[int, int] | None:
+    """The goal's frontier best ranked by what the rule compared (least first for the rules that
+    compare metres), as (index, rank from 1); None when no frontier lies within ``GOAL_FRONTIER_M``."""
+    near = truth <= GOAL_FRONTIER_M
+    if not near.any():
+        return None
+    fusion = decision.frontiers[0].fusion
+    if fusion is not None:
+        key = np.array(fusion.compared) * (1 if fusion.least_wins else -1)
+    else:
+        key = -np.array([f.s_cu for f in decision.frontiers])
+    rank = np.argsort(np.argsort(key, kind="stable"), kind="stable") + 1
+    best = int(np.flatnonzero(near)[np.argmin(rank[near])])
+    return best, int(rank[best])
+
+
+@dataclass
+class GoalFrontierTally:
+    """Over one episode's choices: how often the goal's frontier was listed and taken, its rank, and
+    where the prior predicts metres, how much nearer to the goal it expected it than the frontier taken
+    (negative: it rated the goal's frontier better, and travel or the bonuses outweighed that)."""
+
+    choices: int = 0
+    taken: int = 0
+    ranks: list[int] = field(default_factory=list)
+    listed: list[int] = field(default_factory=list)
+    expected_gap_m: list[float] = field(default_factory=list)
+
+    def add(self, decision: Decision, truth: np.ndarray) -> None:
+        self.choices += 1
+        found = goal_frontier(decision, truth)
+        if found is None:
+            return
+        k, rank = found
+        self.ranks.append(rank)
+        self.listed.append(len(decision.frontiers))
+        took = decision.chosen_frontier
+        if took is not None and truth[took] <= GOAL_FRONTIER_M:
+            self.taken += 1
+            return
+        fusion = decision.frontiers[0].fusion
+        if took is not None and fusion is not None and fusion.expected_m:
+            self.expected_gap_m.append(fusion.expected_m[k] - fusion.expected_m[took])
+
+    def line(self) -> str:
+        listed = f"{len(self.ranks)} of {self.choices} choices"
+        head = f"goal's frontier (<= {GOAL_FRONTIER_M:g} m from the goal) listed at {listed}"
+        if not self.ranks:
+            return head
+        line = f"{head}, taken at {self.taken}; its median rank {np.median(self.ranks):g} of {np.median(self.listed):g}"
+        if self.expected_gap_m:
+            line += f"; expected metres on, against the frontier taken: median {np.median(self.expected_gap_m):+.1f} m"
+        return line
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dataset", required=True)
@@ -98,12 +161,15 @@ def main() -> int:
             session = runner.session(scene, args.policy)
             session.start(ep)
             print(f"# {key}: {ep.goal}, {args.policy}")
+            tally = GoalFrontierTally()
             for step, decision in session.frontier_choices():
                 truth = frontier_goal_distances(decision.frontiers, decision.map, distances)
                 print("\n".join(choice_lines(step, decision, truth)))
+                tally.add(decision, truth)
             result = session.result
             outcome = "success" if result.success else result.failure
             print(f"# {key}: {outcome} in {result.steps} steps, SPL {result.spl:.3f}")
+            print(f"# {key}: {tally.line()}")
     finally:
         runner.close()
     return 0

@@ -59,6 +59,11 @@ class Fusion:
         return f" and the {self.words} words of the frontier's window" if self.words else ""
 
     @property
+    def least_wins(self) -> bool:
+        """Whether ``compared`` ranks least first (the rules that compare metres) or highest first."""
+        return self.rule in ("expected", POTENTIALS_RULE)
+
+    @property
     def max_s_llm(self) -> float:
         return max(self.s_llm) if self.s_llm else 0.0
 
