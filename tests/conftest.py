@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import socket
+import sys
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import pytest
@@ -21,6 +24,22 @@ os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 GIBSON = SHARED / "data" / "gibson_semexp"
 ROOMS_JSONL = SHARED / "data" / "room_objects" / "gibson_3dsg_rooms.jsonl"
+BENCH = Path(__file__).resolve().parents[1] / "bench"
+
+
+@pytest.fixture(scope="session")
+def bench_script():
+    """Loads a script of bench/ (scripts, not a package) as a module, by its name."""
+
+    def load(name: str) -> ModuleType:
+        spec = importlib.util.spec_from_file_location(name, BENCH / f"{name}.py")
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # its dataclasses look their module up while being built
+        spec.loader.exec_module(module)
+        return module
+
+    return load
 
 
 def draw_two_room_house(name: str = "Tiny", height: int = 120, width: int = 200) -> SceneMap:

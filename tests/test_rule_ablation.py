@@ -1,6 +1,5 @@
 """bench/rule_ablation.py: every rule's switch is a real setting, and its table pairs and signs right."""
 
-import importlib.util
 import json
 import math
 import subprocess
@@ -15,12 +14,8 @@ SCRIPT = Path(__file__).resolve().parents[1] / "bench" / "rule_ablation.py"
 
 
 @pytest.fixture(scope="module")
-def ablation():
-    spec = importlib.util.spec_from_file_location("rule_ablation", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up while being built
-    spec.loader.exec_module(module)
-    return module
+def ablation(bench_script):
+    return bench_script("rule_ablation")
 
 
 def test_every_rule_switch_changes_the_config(ablation):
