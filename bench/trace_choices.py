@@ -10,8 +10,9 @@ frontier: travel cost, size in cells, what the rule compared (a language policy'
 or the expected rule's total metres, else S_CU), the prior's expected metres on where it predicts
 them, and the true geodesic metres on from the frontier to the goal (``inf``: off the true floor).
 After each episode, one line on the goal's frontier (one within 1.5 m of the goal by the true floor):
-at how many choices it was listed and taken, its median rank by what the rule compared, and, for a
-prior that predicts metres, how much nearer the goal it expected it than the frontier taken.
+at how many choices it was listed and taken, its median rank by what the rule compared (by S_CU for
+the policies that leave no numbers of their own), and, for a prior that predicts metres, how much
+nearer the goal it expected it than the frontier taken.
 
 What the dashboard shows of one decision, for every decision of an episode, with what the agent cannot
 know: whether a lost episode is the prior's error (it expected the goal beyond the wrong frontier),
@@ -70,17 +71,24 @@ def choice_lines(step: int, decision: Decision, truth: np.ndarray) -> list[str]:
 GOAL_FRONTIER_M = 1.5
 
 
+def rank_order(decision: Decision) -> tuple[np.ndarray, str]:
+    """A key per frontier, least first, and what it is: what a language policy or PONI compared
+    (least first for the rules that compare metres), else S_CU, which only cost-utility ranks by (the
+    other policies without a record leave no numbers of their own in the decision)."""
+    fusion = decision.frontiers[0].fusion
+    if fusion is None:
+        return -np.array([f.s_cu for f in decision.frontiers]), "S_CU"
+    label = "the rule's totals" if fusion.least_wins else "the rule's scores"
+    return np.array(fusion.compared) * (1 if fusion.least_wins else -1), label
+
+
 def goal_frontier(decision: Decision, truth: np.ndarray) -> tuple[int, int] | None:
-    """The goal's frontier best ranked by what the rule compared (least first for the rules that
-    compare metres), as (index, rank from 1); None when no frontier lies within ``GOAL_FRONTIER_M``."""
+    """The goal's frontier best ranked by ``rank_order``, as (index, rank from 1); None when no
+    frontier lies within ``GOAL_FRONTIER_M``."""
     near = truth <= GOAL_FRONTIER_M
     if not near.any():
         return None
-    fusion = decision.frontiers[0].fusion
-    if fusion is not None:
-        key = np.array(fusion.compared) * (1 if fusion.least_wins else -1)
-    else:
-        key = -np.array([f.s_cu for f in decision.frontiers])
+    key, _ = rank_order(decision)
     rank = np.argsort(np.argsort(key, kind="stable"), kind="stable") + 1
     best = int(np.flatnonzero(near)[np.argmin(rank[near])])
     return best, int(rank[best])
@@ -97,6 +105,7 @@ class GoalFrontierTally:
     ranks: list[int] = field(default_factory=list)
     listed: list[int] = field(default_factory=list)
     expected_gap_m: list[float] = field(default_factory=list)
+    ranked_by: str = ""
 
     def add(self, decision: Decision, truth: np.ndarray) -> None:
         self.choices += 1
@@ -104,6 +113,7 @@ class GoalFrontierTally:
         if found is None:
             return
         k, rank = found
+        self.ranked_by = rank_order(decision)[1]
         self.ranks.append(rank)
         self.listed.append(len(decision.frontiers))
         took = decision.chosen_frontier
@@ -120,6 +130,7 @@ class GoalFrontierTally:
         if not self.ranks:
             return head
         line = f"{head}, taken at {self.taken}; its median rank {np.median(self.ranks):g} of {np.median(self.listed):g}"
+        line += f" by {self.ranked_by}"
         if self.expected_gap_m:
             line += f"; expected metres on, against the frontier taken: median {np.median(self.expected_gap_m):+.1f} m"
         return line

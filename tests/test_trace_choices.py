@@ -77,9 +77,13 @@ def test_the_episode_line_counts_the_choices_that_listed_and_took_the_goals_fron
     for took, truth in ((0, [3.0, 0.7, 9.0]), (1, [3.0, 0.7, 9.0]), (0, [3.0, 2.0, 9.0]), (0, [3.0, 0.9, 1.1])):
         tally.add(_decision(took, fusion), np.array(truth))
     assert tally.line() == (
-        "goal's frontier (<= 1.5 m from the goal) listed at 3 of 4 choices, taken at 1; its median rank 2 of 3; "
+        "goal's frontier (<= 1.5 m from the goal) listed at 3 of 4 choices, taken at 1; its median rank 2 of 3 "
+        "by the rule's totals; "
         "expected metres on, against the frontier taken: median -0.5 m"
     )
+    scores = trace.GoalFrontierTally()
+    scores.add(_decision(0), np.array([3.0, 2.0, 1.2]))
+    assert scores.line().endswith("taken at 0; its median rank 3 of 3 by S_CU")  # no record: no expected metres
     empty = trace.GoalFrontierTally()
     empty.add(_decision(0), np.ones(3) * 5)
     assert empty.line() == "goal's frontier (<= 1.5 m from the goal) listed at 0 of 1 choices"
